@@ -1,0 +1,88 @@
+"""Particles and the belief generators of a task.
+
+A particle is one guess of the uncertain transforms: the grasp ``X_GM`` and the environment
+pose ``X_WO``. An offset on an axis is added to that pose's xyz [m] or roll-pitch-yaw [rad]
+parameters, the way the task file writes poses (``grasp.pitch=2deg`` tilts the part about its
+own origin; ``env.y=1cm`` moves the environment along the world y axis).
+"""
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.geometry.pose import pose_from_xyz_rpy
+from bilba_dist.task.loader import Task
+from bilba_dist.task.schema import (
+    AXES,
+    ExplicitBelief,
+    ExtremalRandomBelief,
+    check_axis_key,
+)
+
+
+@dataclass(frozen=True)
+class Particle:
+    """One guess of the grasp ``X_GM`` and the environment pose ``X_WO``."""
+
+    X_GM: pin.SE3
+    X_WO: pin.SE3
+    offsets: Mapping[str, float] = field(default_factory=dict)  # axis key -> offset [m|rad]
+
+    def X_OM(self, X_WG: pin.SE3) -> pin.SE3:
+        """The manipuland in the environment frame with the gripper at ``X_WG``."""
+        return self.X_WO.inverse() * X_WG * self.X_GM
+
+
+def make_particle(task: Task, offsets: Mapping[str, float]) -> Particle:
+    """The particle whose grasp and environment pose are offset per axis from nominal."""
+    poses = {"grasp": task.spec.grasp, "env": task.spec.environment_pose}
+    moved: dict[str, list[float]] = {k: [*p.xyz, *p.rpy] for k, p in poses.items()}
+    for key, value in offsets.items():
+        frame, axis = check_axis_key(key)
+        moved[frame][AXES.index(axis)] += value
+    return Particle(
+        X_GM=pose_from_xyz_rpy(moved["grasp"][:3], moved["grasp"][3:]),
+        X_WO=pose_from_xyz_rpy(moved["env"][:3], moved["env"][3:]),
+        offsets=dict(offsets),
+    )
+
+
+def initial_belief(task: Task) -> tuple[Particle, ...]:
+    """The task's initial belief, by its generator (deterministic: seeded where random)."""
+    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
+    spec = task.spec.belief
+    if isinstance(spec, ExplicitBelief):
+        offsets = [
+            {
+                **{f"grasp.{a}": v for a, v in p.grasp.items()},
+                **{f"env.{a}": v for a, v in p.env.items()},
+            }
+            for p in spec.particles
+        ]
+    elif isinstance(spec, ExtremalRandomBelief):
+        offsets = extremal_offsets(bounds) + random_offsets(bounds, spec.random, spec.seed)
+    else:
+        offsets = [{}, *extremal_offsets(bounds)]
+    return tuple(make_particle(task, o) for o in offsets)
+
+
+def extremal_offsets(bounds: Mapping[str, float]) -> list[dict[str, float]]:
+    """+n and -n on each bounded axis, one axis at a time."""
+    return [{key: sign * n} for key, n in bounds.items() for sign in (1.0, -1.0)]
+
+
+def random_offsets(bounds: Mapping[str, float], k: int, seed: int) -> list[dict[str, float]]:
+    """``k`` offsets uniform inside the ellipsoid whose semi-axes are the bounds."""
+    keys = list(bounds)
+    if not keys or k == 0:
+        return []
+    rng = np.random.default_rng(seed)
+    d = len(keys)
+    direction = rng.normal(size=(k, d))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    radius = rng.uniform(size=(k, 1)) ** (1.0 / d)
+    unit = direction * radius
+    scale = np.array([bounds[key] for key in keys])
+    return [dict(zip(keys, (row * scale).tolist(), strict=True)) for row in unit]

@@ -1,0 +1,1 @@
+"""The `bilba` command."""

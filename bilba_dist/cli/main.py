@@ -1,0 +1,44 @@
+"""The `bilba` command: one module per sub-command, errors as one line and exit code 2."""
+
+import sys
+from collections.abc import Callable
+from functools import wraps
+from typing import Any, TypeVar
+
+import click
+
+from bilba_dist import __version__
+from bilba_dist.errors import BilbaError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: Exit code for bad input (a malformed task, an impossible goal, a missing file).
+EXIT_BAD_INPUT = 2
+
+
+def user_errors(command: F) -> F:
+    """Turn a BilbaError into one line on stderr and exit code 2, never a traceback."""
+
+    @wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except BilbaError as exc:
+            click.echo(f"bilba: error: {exc}", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+
+    return wrapper  # type: ignore[return-value]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="bilba")
+def cli() -> None:
+    """Plan robot assembly under uncertainty with BILBA."""
+
+
+def main() -> None:
+    from bilba_dist.cli import graph, tasks
+
+    cli.add_command(tasks.tasks)
+    cli.add_command(graph.graph)
+    cli(prog_name="bilba")

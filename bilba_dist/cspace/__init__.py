@@ -1,0 +1,1 @@
+"""C-obstacle slices: Minkowski polytopes, boundary vertices, point queries, sampling."""

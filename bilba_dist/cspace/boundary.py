@@ -1,0 +1,109 @@
+"""Vertices of the boundary of a union of convex polytopes, with their contact sets.
+
+Three kinds, each kept only if no polytope holds it strictly inside:
+1. a vertex of one polytope;
+2. an edge of one polytope crossing a facet of another;
+3. a point where facets of three different polytopes meet (rare, but the floor of a channel
+   between walls has only these: without them a peg's goal region has no vertex).
+Polytope pairs and triples whose bounding boxes do not overlap are skipped.
+"""
+
+from itertools import combinations, permutations
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from bilba_dist.cspace.polytope import TOL, Polytope
+
+#: Planes whose normals' triple product is below this are treated as parallel.
+SINGULAR = 1e-9
+
+
+def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndarray:
+    """All boundary vertices of the union, deduplicated, as a (V, 3) array."""
+    overlap = _overlaps(polytopes)
+    candidates = [p.vertices for p in polytopes]
+    for i, j in permutations(range(len(polytopes)), 2):
+        if overlap[i, j]:
+            candidates.append(_edge_facet(polytopes[i], polytopes[j]))
+    for i, j, k in combinations(range(len(polytopes)), 3):
+        if overlap[i, j] and overlap[j, k] and overlap[i, k]:
+            candidates.append(_facet_triples(polytopes[i], polytopes[j], polytopes[k]))
+    points = np.concatenate([c for c in candidates if len(c)]) if candidates else np.zeros((0, 3))
+    points = points[stack.slack(points).min(axis=1) >= -TOL]
+    return dedupe(points)
+
+
+def _overlaps(polytopes: list[Polytope]) -> np.ndarray:
+    lower = np.array([p.lower for p in polytopes]) - TOL
+    upper = np.array([p.upper for p in polytopes]) + TOL
+    return np.all(
+        (lower[:, None, :] <= upper[None, :, :]) & (lower[None, :, :] <= upper[:, None, :]), axis=2
+    )
+
+
+def _inside_closed(p: Polytope, points: np.ndarray) -> np.ndarray:
+    return (points @ p.A.T - p.b).max(axis=1) <= TOL
+
+
+def _edge_facet(a: Polytope, b: Polytope) -> np.ndarray:
+    """Points where an edge of ``a`` crosses a facet of ``b`` (strictly between its ends)."""
+    p0 = a.vertices[a.edges[:, 0]]
+    d = a.vertices[a.edges[:, 1]] - p0
+    denom = d @ b.A.T  # (E, F)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (b.b[None, :] - p0 @ b.A.T) / denom
+    length = np.linalg.norm(d, axis=1)[:, None]
+    ok = (np.abs(denom) > SINGULAR * length) & (t * length > TOL) & ((1 - t) * length > TOL)
+    e, f = np.nonzero(ok)
+    points = p0[e] + t[e, f][:, None] * d[e]
+    return points[_inside_closed(b, points)]
+
+
+def _facet_triples(a: Polytope, b: Polytope, c: Polytope) -> np.ndarray:
+    """Points where one facet plane of each of ``a``, ``b``, ``c`` meet, inside all three."""
+    grid = np.meshgrid(np.arange(len(a.b)), np.arange(len(b.b)), np.arange(len(c.b)), indexing="ij")
+    ia, ib, ic = (g.ravel() for g in grid)
+    normals = np.stack([a.A[ia], b.A[ib], c.A[ic]], axis=1)  # (T, 3, 3)
+    offsets = np.stack([a.b[ia], b.b[ib], c.b[ic]], axis=1)
+    det = np.linalg.det(normals)
+    ok = np.abs(det) > SINGULAR
+    points = np.linalg.solve(normals[ok], offsets[ok][:, :, None])[:, :, 0]
+    for p in (a, b, c):
+        points = points[_inside_closed(p, points)]
+    return points
+
+
+def dedupe(points: np.ndarray, radius: float = 10 * TOL) -> np.ndarray:
+    """One representative (the lexicographically first) per cluster of nearby points."""
+    if len(points) == 0:
+        return points.reshape(0, 3)
+    order = np.lexsort(points.T[::-1])
+    points = points[order]
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    keep = np.ones(len(points), dtype=bool)
+    if len(pairs):
+        keep[pairs.max(axis=1)] = False
+    return points[keep]
+
+
+class FacetStack:
+    """All polytopes' facets in one matrix, for vectorised slack over many points."""
+
+    def __init__(self, polytopes: list[Polytope]) -> None:
+        self.A = np.concatenate([p.A for p in polytopes])
+        self.b = np.concatenate([p.b for p in polytopes])
+        counts = [len(p.b) for p in polytopes]
+        self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+        self.owner = np.repeat(np.arange(len(polytopes)), counts)
+
+    def facet_slack(self, points: np.ndarray) -> np.ndarray:
+        """(N, F) signed distance of each point to each facet plane [m]."""
+        return np.atleast_2d(points) @ self.A.T - self.b
+
+    def slack(self, points: np.ndarray) -> np.ndarray:
+        """(N, P) per-polytope slack: < 0 strictly inside, ~0 on the boundary."""
+        per_facet = self.facet_slack(points)
+        if per_facet.shape[0] == 0:
+            return np.zeros((0, len(self.starts)))
+        return np.maximum.reduceat(per_facet, self.starts, axis=1)

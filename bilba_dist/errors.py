@@ -1,0 +1,20 @@
+"""The exceptions of bilba_dist: one root, a few kinds a user can act on.
+
+The CLI turns any `BilbaError` into one line on stderr and exit code 2.
+"""
+
+
+class BilbaError(Exception):
+    """Root of every error bilba_dist raises on purpose."""
+
+
+class TaskError(BilbaError):
+    """A task file (or a built-in task name) is malformed or inconsistent."""
+
+
+class GeometryError(BilbaError):
+    """A part's geometry is unusable: degenerate, non-convex, or an unknown face."""
+
+
+class NoScheduleError(BilbaError):
+    """The mode graph holds no path from the free mode to the goal contact."""

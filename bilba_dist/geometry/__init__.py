@@ -1,0 +1,1 @@
+"""Convex pieces with named faces, parts, poses and contact pairs."""

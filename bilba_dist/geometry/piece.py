@@ -1,0 +1,176 @@
+"""Convex pieces with named faces, and parts made of them.
+
+Coordinates are in the part's own frame, in metres. A face is named ``piece/face``: box faces
+``+x -x +y -y +z -z``, convex facets by the task's name map (face name → outward normal in the
+piece frame) or ``f0, f1, …`` in a fixed order (by normal, descending x, then y, then z).
+"""
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.errors import GeometryError
+from bilba_dist.geometry.hull import convex_hull, face_edges, planar_faces
+from bilba_dist.geometry.pose import transform_points
+
+BOX_FACES = {
+    "+x": (1.0, 0.0, 0.0),
+    "-x": (-1.0, 0.0, 0.0),
+    "+y": (0.0, 1.0, 0.0),
+    "-y": (0.0, -1.0, 0.0),
+    "+z": (0.0, 0.0, 1.0),
+    "-z": (0.0, 0.0, -1.0),
+}
+#: A named normal matches a facet when within this angle [rad].
+NAME_MATCH_ANGLE = np.deg2rad(1.0)
+#: A listed vertex further than this inside the hull means the piece is not convex [m].
+CONVEX_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class Face:
+    """A planar face: ``normal · x = offset`` on it, ``<`` inside the piece (part frame)."""
+
+    name: str  # "piece/face"
+    normal: np.ndarray
+    offset: float
+    vertices: tuple[int, ...]  # indices into the piece's vertices, counter-clockwise
+
+
+@dataclass(frozen=True)
+class ConvexPiece:
+    """A convex polyhedron in its part's frame."""
+
+    name: str
+    vertices: np.ndarray  # (N, 3) hull vertices only [m]
+    faces: tuple[Face, ...]
+    edges: np.ndarray  # (E, 2) vertex index pairs
+
+    def face(self, name: str) -> Face:
+        for face in self.faces:
+            if face.name == name:
+                return face
+        known = ", ".join(f.name for f in self.faces)
+        raise GeometryError(f"piece {self.name!r} has no face {name!r}; its faces: {known}")
+
+    def faces_at(self, point: np.ndarray, tol: float = 1e-6) -> list[str]:
+        """Names of the faces ``point`` (part frame) lies on: 1 inside a face, 2 on an edge,
+        3 or more at a corner. The same rule labels C-obs facets and simulated contacts."""
+        on = []
+        for face in self.faces:
+            if abs(float(face.normal @ point) - face.offset) <= tol:
+                on.append(face.name)
+        return on
+
+
+def box_piece(name: str, size: Sequence[float], X_PB: pin.SE3) -> ConvexPiece:
+    """A box of ``size`` [m] whose centre frame is at ``X_PB`` in the part frame."""
+    half = np.asarray(size, dtype=float) / 2.0
+    if half.shape != (3,) or np.any(half <= 0):
+        raise GeometryError(f"piece {name!r}: box size must be three positive lengths, got {size}")
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    return convex_piece(name, corners * half, X_PB, BOX_FACES)
+
+
+def convex_piece(
+    name: str,
+    vertices: Sequence[Sequence[float]] | np.ndarray,
+    X_PC: pin.SE3,
+    face_names: Mapping[str, Sequence[float]] | None = None,
+) -> ConvexPiece:
+    """The convex piece spanned by ``vertices`` (piece frame), placed at ``X_PC``.
+
+    Every listed vertex must be a corner of the hull: a vertex inside it means the user
+    described a non-convex shape, which is an error, not something to silently fill in.
+    """
+    points = np.asarray(vertices, dtype=float)
+    hull = convex_hull(points, f"piece {name!r}")
+    _check_convex(name, points, hull)
+    faces = planar_faces(points, hull)
+    names = _name_faces(name, faces, face_names or {})
+    keep = np.array(sorted(hull.vertices))
+    remap = {int(old): new for new, old in enumerate(keep)}
+    R = X_PC.rotation
+    placed = tuple(
+        Face(
+            name=f"{name}/{label}",
+            normal=R @ face.normal,
+            offset=float(face.offset + (R @ face.normal) @ X_PC.translation),
+            vertices=tuple(remap[i] for i in face.vertices),
+        )
+        for label, face in zip(names, faces, strict=True)
+    )
+    return ConvexPiece(
+        name=name,
+        vertices=transform_points(X_PC, points[keep]),
+        faces=placed,
+        edges=face_edges(f.vertices for f in placed),
+    )
+
+
+def _check_convex(name: str, points: np.ndarray, hull: object) -> None:
+    equations = hull.equations  # type: ignore[attr-defined]
+    corners = set(int(i) for i in hull.vertices)  # type: ignore[attr-defined]
+    for i, p in enumerate(points):
+        if i in corners:
+            continue
+        depth = float((equations[:, :3] @ p + equations[:, 3]).max())
+        if depth < -CONVEX_TOL:
+            raise GeometryError(
+                f"piece {name!r} is not convex: vertex {i} {p.tolist()} lies "
+                f"{-depth * 1000:.3g} mm inside the hull of the others; split it into convex pieces"
+            )
+
+
+def _name_faces(
+    piece: str, faces: list[Face] | list, face_names: Mapping[str, Sequence[float]]
+) -> list[str]:
+    order = sorted(range(len(faces)), key=lambda i: tuple(-np.round(faces[i].normal, 9)))
+    names = [""] * len(faces)
+    for k, i in enumerate(order):
+        names[i] = f"f{k}"
+    for label, direction in face_names.items():
+        d = np.asarray(direction, dtype=float)
+        if d.shape != (3,) or np.linalg.norm(d) == 0:
+            raise GeometryError(f"piece {piece!r}: face {label!r} needs a nonzero 3-vector normal")
+        d = d / np.linalg.norm(d)
+        angles = [np.arccos(np.clip(f.normal @ d, -1, 1)) for f in faces]
+        best = int(np.argmin(angles))
+        if angles[best] > NAME_MATCH_ANGLE:
+            raise GeometryError(
+                f"piece {piece!r}: no facet has the normal {d.round(4).tolist()} given for "
+                f"face {label!r}"
+            )
+        names[best] = label
+    if len(set(names)) != len(names):
+        raise GeometryError(f"piece {piece!r}: two faces share a name in {sorted(names)}")
+    return names
+
+
+@dataclass(frozen=True)
+class Part:
+    """A rigid part: a union of convex pieces in one frame."""
+
+    name: str
+    pieces: tuple[ConvexPiece, ...]
+
+    def __post_init__(self) -> None:
+        names = [p.name for p in self.pieces]
+        if len(set(names)) != len(names):
+            raise GeometryError(f"part {self.name!r}: piece names must be unique, got {names}")
+        if not self.pieces:
+            raise GeometryError(f"part {self.name!r} has no pieces")
+
+    @property
+    def face_names(self) -> list[str]:
+        return [f.name for p in self.pieces for f in p.faces]
+
+    def face(self, name: str) -> Face:
+        piece_name = name.split("/", 1)[0]
+        for piece in self.pieces:
+            if piece.name == piece_name:
+                return piece.face(name)
+        known = ", ".join(p.name for p in self.pieces)
+        raise GeometryError(f"part {self.name!r} has no piece {piece_name!r}; pieces: {known}")

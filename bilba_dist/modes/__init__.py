@@ -1,0 +1,1 @@
+"""The contact-mode graph: modes, belief-dependent edge costs, Dijkstra, pruning."""

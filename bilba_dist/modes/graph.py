@@ -1,0 +1,135 @@
+"""The contact-mode graph of a C-obs slice, weighted for a belief, searched with Dijkstra.
+
+Vertices are modes (contact pairs) found at boundary vertices of the slice; an edge joins two
+modes that occur together at a boundary vertex. The free mode connects to the ``n_free``
+modes nearest the belief. The cost of entering mode v is ``1 − δ_proj·|u(b)·n(v)|``: u(b) is
+the principal direction of the particles' position spread and n(v) the C-obs normal of v,
+so contacts whose normal points along the uncertainty are slightly preferred.
+"""
+
+from collections import Counter
+from dataclasses import dataclass
+from itertools import combinations
+
+import networkx as nx
+import numpy as np
+
+from bilba_dist.cspace.slice import CObsSlice
+from bilba_dist.errors import NoScheduleError
+from bilba_dist.geometry.contact import FREE, ContactPair
+
+#: Points sampled on each mode's region to find the modes nearest the belief.
+NEAREST_SAMPLES = 32
+
+
+@dataclass(frozen=True)
+class GraphParams:
+    n_free: int = 3
+    delta_proj: float = 1e-4
+    min_mode_vertices: int = 4
+
+
+class ModeGraph:
+    """A directed graph over modes with belief-dependent edge costs; prunable."""
+
+    def __init__(self, cslice: CObsSlice, graph: nx.DiGraph, goal: ContactPair) -> None:
+        self.cslice = cslice
+        self.graph = graph
+        self.goal = goal
+
+    @property
+    def modes(self) -> list[ContactPair]:
+        return sorted(n for n in self.graph.nodes if n != FREE)
+
+    def normal(self, mode: ContactPair) -> np.ndarray:
+        return np.asarray(self.graph.nodes[mode]["normal"])
+
+    def schedule(self, start: ContactPair = FREE) -> list[ContactPair]:
+        """The cheapest mode sequence from ``start`` to the goal (both included)."""
+        if self.goal not in self.graph:
+            raise NoScheduleError(f"the goal contact {self.goal} does not occur on the C-obs slice")
+        try:
+            return list(nx.dijkstra_path(self.graph, start, self.goal, weight="cost"))
+        except (nx.NetworkXNoPath, nx.NodeNotFound):
+            raise NoScheduleError(
+                f"no path in the mode graph from {start} to {self.goal}"
+            ) from None
+
+    def prune(self, u: ContactPair, v: ContactPair) -> None:
+        """Remove the edge u → v (a transition that failed)."""
+        if self.graph.has_edge(u, v):
+            self.graph.remove_edge(u, v)
+
+    def to_dot(self) -> str:
+        lines = ["digraph modes {", "  rankdir=LR;"]
+        for node in [FREE, *self.modes]:
+            lines.append(f'  "{node}";')
+        for u, v, cost in sorted(self.graph.edges(data="cost")):
+            lines.append(f'  "{u}" -> "{v}" [label="{cost:.6f}"];')
+        lines.append("}")
+        return "\n".join(lines) + "\n"
+
+
+def build_mode_graph(
+    cslice: CObsSlice, positions: np.ndarray, goal: ContactPair, params: GraphParams
+) -> ModeGraph:
+    """The mode graph of ``cslice`` weighted for particles at ``positions`` (N, 3) in O."""
+    counts = Counter(mode for contacts in cslice.vertex_contacts for mode in contacts)
+    modes = sorted(m for m, c in counts.items() if c >= params.min_mode_vertices or m == goal)
+    normals = {m: mode_normal(cslice, m) for m in modes}
+    u = uncertainty_direction(positions)
+    graph = nx.DiGraph()
+    graph.add_node(FREE, normal=np.zeros(3))
+    for m in modes:
+        graph.add_node(m, normal=normals[m])
+    kept = set(modes)
+    pairs = {
+        tuple(sorted(pair))
+        for contacts in cslice.vertex_contacts
+        for pair in combinations(sorted(contacts & kept), 2)
+    }
+    for a, b in sorted(pairs):
+        graph.add_edge(a, b, cost=edge_cost(u, normals[b], params.delta_proj))
+        graph.add_edge(b, a, cost=edge_cost(u, normals[a], params.delta_proj))
+    for m in nearest_modes(cslice, modes, positions.mean(axis=0), params.n_free):
+        graph.add_edge(FREE, m, cost=edge_cost(u, normals[m], params.delta_proj))
+    return ModeGraph(cslice, graph, goal)
+
+
+def edge_cost(u: np.ndarray, normal: np.ndarray, delta_proj: float) -> float:
+    return float(1.0 - delta_proj * abs(float(u @ normal)))
+
+
+def uncertainty_direction(positions: np.ndarray) -> np.ndarray:
+    """Unit principal direction of the centred positions' spread; zero when there is none."""
+    centred = np.atleast_2d(positions) - np.atleast_2d(positions).mean(axis=0)
+    if len(centred) < 2 or np.allclose(centred, 0.0, atol=1e-12):
+        return np.zeros(3)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    u = vt[0]
+    return u if u[np.argmax(np.abs(u))] > 0 else -u  # fix the sign: deterministic output
+
+
+def mode_normal(cslice: CObsSlice, mode: ContactPair) -> np.ndarray:
+    """Area-weighted mean outward normal of the C-obs facets labelled with ``mode``."""
+    total = np.zeros(3)
+    for i, f in cslice.mode_facets(mode):
+        ring = cslice.polytopes[i].polygons[f]
+        area = 0.5 * np.linalg.norm(np.cross(ring[1:-1] - ring[0], ring[2:] - ring[0]).sum(axis=0))
+        total += max(area, 1e-12) * cslice.polytopes[i].A[f]
+    norm = np.linalg.norm(total)
+    return total / norm if norm > 0 else total
+
+
+def nearest_modes(
+    cslice: CObsSlice, modes: list[ContactPair], point: np.ndarray, k: int
+) -> list[ContactPair]:
+    """The ``k`` modes whose boundary region comes nearest ``point``; ties by name."""
+    rng = np.random.default_rng(0)
+    distance = {}
+    for m in modes:
+        samples = cslice.sample_mode(m, NEAREST_SAMPLES, rng)
+        corners = cslice.vertices[[m in c for c in cslice.vertex_contacts]]
+        candidates = np.concatenate([samples, corners])
+        distance[m] = float(np.linalg.norm(candidates - point, axis=1).min())
+    return sorted(modes, key=lambda m: (round(distance[m], 9), m))[:k]

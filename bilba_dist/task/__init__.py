@@ -1,0 +1,1 @@
+"""Task files: schema, loading, and the built-in tasks (tasks/*.yaml)."""

@@ -1,0 +1,200 @@
+"""Load a task by built-in name or path: validate the YAML, build the parts, check the goal."""
+
+import hashlib
+import json
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import pinocchio as pin
+from pydantic import BaseModel, ValidationError
+
+from bilba_dist.errors import BilbaError, TaskError
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.piece import Part, box_piece, convex_piece
+from bilba_dist.geometry.pose import pose_from_xyz_rpy
+from bilba_dist.task.schema import PartSpec, PoseSpec, TaskSpec, parse_axis_values
+from bilba_dist.task.yaml_lines import Location, line_of, load_yaml_with_lines, read_text
+
+
+@dataclass(frozen=True)
+class Task:
+    """A validated task with its parts built. Poses: ``X_GM`` nominal grasp, ``X_WO`` nominal
+    environment pose, ``X_WG0`` gripper at the start."""
+
+    spec: TaskSpec
+    source: str
+    manipuland: Part
+    environment: Part
+    X_GM: pin.SE3
+    X_WO: pin.SE3
+    X_WG0: pin.SE3
+    goal: ContactPair
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
+    def hash(self) -> str:
+        """SHA-256 of the validated task (after overrides), in canonical JSON."""
+        canonical = json.dumps(self.spec.model_dump(mode="json"), sort_keys=True)
+        return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def builtin_tasks() -> dict[str, Path]:
+    """Built-in task names and their YAML files (shipped inside the package)."""
+    folder = resources.files("bilba_dist.task") / "tasks"
+    return {
+        Path(str(entry)).stem: Path(str(entry))
+        for entry in folder.iterdir()
+        if str(entry).endswith(".yaml")
+    }
+
+
+def resolve_task_path(name_or_path: str) -> Path:
+    path = Path(name_or_path)
+    if path.is_file():
+        return path
+    builtins = builtin_tasks()
+    if name_or_path in builtins:
+        return builtins[name_or_path]
+    if path.suffix in (".yaml", ".yml") or "/" in name_or_path:
+        raise TaskError(f"{name_or_path}: no such task file")
+    raise TaskError(
+        f"no task file or built-in task named {name_or_path!r}; built-in: "
+        f"{', '.join(sorted(builtins))}"
+    )
+
+
+def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Task:
+    """Load and validate a task; ``uncertainty`` (``["grasp.pitch=2deg", …]``) replaces the
+    file's bounds when given."""
+    path = resolve_task_path(name_or_path)
+    source = str(path)
+    data, lines = load_yaml_with_lines(read_text(path), source)
+    if not isinstance(data, dict):
+        raise TaskError(f"{source}: a task file must be a YAML mapping at the top level")
+    if uncertainty:
+        data = {**data, "uncertainty": parse_overrides(uncertainty)}
+    try:
+        spec = TaskSpec.model_validate(data)
+    except ValidationError as exc:
+        raise TaskError(_describe(exc, source, lines)) from None
+    try:
+        return build_task(spec, source)
+    except BilbaError as exc:
+        raise TaskError(f"{source}: {exc}") from None
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, float]:
+    """``["grasp.pitch=2deg", "env.y=1cm"]`` → bounds in SI units."""
+    raw: dict[str, Any] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise TaskError(f"--uncertainty {item!r}: write AXIS=VALUE, e.g. grasp.pitch=2deg")
+        raw[key.strip()] = value.strip()
+    try:
+        return parse_axis_values(raw, prefix="")
+    except ValueError as exc:
+        raise TaskError(f"--uncertainty: {exc}") from None
+
+
+def build_task(spec: TaskSpec, source: str) -> Task:
+    manipuland = build_part(spec.manipuland)
+    environment = build_part(spec.environment)
+    goal = ContactPair(spec.goal.env, spec.goal.manip)
+    for part, face, key in (
+        (environment, goal.env, "goal.env"),
+        (manipuland, goal.manip, "goal.manip"),
+    ):
+        if face not in part.face_names:
+            raise TaskError(
+                f"{key}: {part.name!r} has no face {face!r}; faces: {', '.join(part.face_names)}"
+            )
+    return Task(
+        spec=spec,
+        source=source,
+        manipuland=manipuland,
+        environment=environment,
+        X_GM=to_pose(spec.grasp),
+        X_WO=to_pose(spec.environment_pose),
+        X_WG0=to_pose(spec.robot_start.gripper),
+        goal=goal,
+    )
+
+
+def to_pose(spec: PoseSpec) -> pin.SE3:
+    return pose_from_xyz_rpy(spec.xyz, spec.rpy)
+
+
+def build_part(spec: PartSpec) -> Part:
+    pieces = []
+    for piece in spec.pieces:
+        X = to_pose(piece.pose)
+        if piece.box is not None:
+            pieces.append(box_piece(piece.name, piece.box.size, X))
+        elif piece.convex is not None:
+            pieces.append(convex_piece(piece.name, piece.convex.vertices, X, piece.convex.faces))
+    return Part(spec.name, tuple(pieces))
+
+
+def _describe(exc: ValidationError, source: str, lines: dict[Location, int]) -> str:
+    """One line for the first validation error: file, line, key path, and what is wrong."""
+    errors = exc.errors()
+    first = errors[0]
+    loc: Location = tuple(first["loc"])
+    line = line_of(loc, lines)
+    where = f"{source}:{line}" if line is not None else source
+    key = _dotted(loc)
+    if first["type"] == "extra_forbidden":
+        allowed = _allowed_keys(loc[:-1])
+        message = f"unknown key {loc[-1]!r}" + (
+            f"; allowed: {', '.join(allowed)}" if allowed else ""
+        )
+    else:
+        message = first["msg"].removeprefix("Value error, ")
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return f"{where}: {key}: {message}{more}" if key else f"{where}: {message}{more}"
+
+
+def _dotted(loc: Location) -> str:
+    text = ""
+    for part in loc:
+        if isinstance(part, int):
+            text += f"[{part}]"
+        elif part in ("axis", "extremal+random", "explicit"):
+            continue  # pydantic's discriminator tag, not a key the user wrote
+        else:
+            text += f".{part}" if text else str(part)
+    return text
+
+
+def _allowed_keys(loc: Location) -> list[str]:
+    """The keys allowed at ``loc`` in the task schema, found by walking the models."""
+    candidates: list[type[BaseModel]] = [TaskSpec]
+    for part in loc:
+        if isinstance(part, int):
+            continue
+        following: list[type[BaseModel]] = []
+        for model in candidates:
+            if part in model.model_fields:
+                following += _models_in(model.model_fields[str(part)].annotation)
+            elif part in _generator_tags(model):
+                following.append(model)
+        candidates = following
+    return sorted(candidates[0].model_fields) if len(candidates) == 1 else []
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in getattr(annotation, "__args__", ()) for m in _models_in(arg)]
+
+
+def _generator_tags(model: type[BaseModel]) -> tuple[str, ...]:
+    field = model.model_fields.get("generator")
+    return tuple(getattr(field.annotation, "__args__", ())) if field is not None else ()

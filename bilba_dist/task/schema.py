@@ -1,0 +1,178 @@
+"""The task file, as typed models. Unknown keys and wrong types are errors.
+
+Lengths accept ``m cm mm`` and angles ``deg rad`` (bare numbers are metres and radians).
+Planner parameters default to the values of the authors' implementation (DESIGN.md).
+"""
+
+from typing import Annotated, Literal
+
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
+
+from bilba_dist.task.units import Angle, Length, parse_angle, parse_length
+
+AXES = ("x", "y", "z", "roll", "pitch", "yaw")
+ANGULAR_AXES = ("roll", "pitch", "yaw")
+
+
+class Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class PoseSpec(Strict):
+    """A pose: translation [m] and roll-pitch-yaw [rad] (Z·Y·X order)."""
+
+    xyz: tuple[Length, Length, Length] = (0.0, 0.0, 0.0)
+    rpy: tuple[Angle, Angle, Angle] = (0.0, 0.0, 0.0)
+
+
+class BoxSpec(Strict):
+    size: tuple[Length, Length, Length]
+
+
+class ConvexSpec(Strict):
+    vertices: list[tuple[Length, Length, Length]] = Field(min_length=4)
+    faces: dict[str, tuple[float, float, float]] = Field(
+        default_factory=dict, description="face name -> outward normal in the piece frame"
+    )
+
+
+class PieceSpec(Strict):
+    name: str = Field(pattern=r"^[A-Za-z0-9_\-]+$")
+    box: BoxSpec | None = None
+    convex: ConvexSpec | None = None
+    pose: PoseSpec = PoseSpec()
+
+    @model_validator(mode="after")
+    def _one_shape(self) -> "PieceSpec":
+        if (self.box is None) == (self.convex is None):
+            raise ValueError(f"piece {self.name!r} needs exactly one of 'box' or 'convex'")
+        return self
+
+
+class PartSpec(Strict):
+    name: str
+    pieces: list[PieceSpec] = Field(min_length=1)
+
+
+class RobotStartSpec(Strict):
+    gripper: PoseSpec = Field(description="X_WG at the start")
+    joints: tuple[float, float, float, float, float, float, float] | None = Field(
+        default=None, description="Panda joint angles [rad], the IK seed"
+    )
+
+
+class GoalSpec(Strict):
+    env: str = Field(description="environment face, 'piece/face'")
+    manip: str = Field(description="manipuland face, 'piece/face'")
+
+
+class AxisBelief(Strict):
+    generator: Literal["axis"] = "axis"
+
+
+class ExtremalRandomBelief(Strict):
+    generator: Literal["extremal+random"]
+    random: int = Field(default=8, ge=0)
+    seed: int = 0
+
+
+class ParticleOffset(Strict):
+    """One particle as offsets from the nominal grasp and environment pose, per axis."""
+
+    grasp: dict[str, float] = Field(default_factory=dict)
+    env: dict[str, float] = Field(default_factory=dict)
+
+    @field_validator("grasp", "env", mode="before")
+    @classmethod
+    def _axis_values(cls, offsets: object, info: ValidationInfo) -> dict[str, float]:
+        return parse_axis_values(offsets, prefix=f"{info.field_name}.")
+
+
+class ExplicitBelief(Strict):
+    generator: Literal["explicit"]
+    particles: list[ParticleOffset] = Field(min_length=1)
+
+
+BeliefSpec = Annotated[
+    AxisBelief | ExtremalRandomBelief | ExplicitBelief, Field(discriminator="generator")
+]
+
+
+class PlannerParams(Strict):
+    """Defaults from the authors' implementation (DESIGN.md)."""
+
+    n_free: int = Field(default=3, ge=1)
+    delta_proj: float = Field(default=1e-4, ge=0)
+    min_mode_vertices: int = Field(default=4, ge=1)
+    n_attempts: int = Field(default=50, ge=1)
+    timeout_s: float = Field(default=900.0, gt=0)
+    setpoints_per_particle: int = Field(default=32, ge=1)
+    noisy_setpoints: int = Field(default=32, ge=0)
+    setpoint_noise_m: float = Field(default=0.01, ge=0)
+    gp_test_points: int = Field(default=1000, ge=1)
+    gp_noise: float = Field(default=0.02, ge=0)
+    gp_simulated: int = Field(default=31, ge=1)
+    gp_rounds: int = Field(default=3, ge=0)
+    gp_restarts: int = Field(default=9, ge=0)
+    motion_timeout_s: float = Field(default=5.0, gt=0)
+    sim_timestep_s: float = Field(default=0.005, gt=0)
+    contact_distance_m: float = Field(default=0.001, ge=0)
+
+
+class TaskSpec(Strict):
+    name: str
+    description: str = ""
+    manipuland: PartSpec
+    environment: PartSpec
+    grasp: PoseSpec = Field(description="nominal X_GM")
+    environment_pose: PoseSpec = Field(description="nominal X_WO")
+    robot_start: RobotStartSpec
+    goal: GoalSpec
+    friction: float = Field(gt=0)
+    uncertainty: dict[str, float] = Field(default_factory=dict)
+    belief: BeliefSpec = AxisBelief()
+    planner: PlannerParams = PlannerParams()
+
+    @field_validator("uncertainty", mode="before")
+    @classmethod
+    def _bounds(cls, bounds: object) -> dict[str, float]:
+        values = parse_axis_values(bounds, prefix="")
+        negative = [k for k, v in values.items() if v < 0]
+        if negative:
+            raise ValueError(f"uncertainty bounds must be >= 0: {', '.join(negative)}")
+        return values
+
+
+def parse_axis_values(values: object, prefix: str) -> dict[str, float]:
+    """Read ``{axis: quantity}`` with the unit kind each axis needs (length or angle)."""
+    if values is None:
+        return {}
+    if not isinstance(values, dict):
+        raise ValueError(f"expected a mapping of axis to value, got {values!r}")
+    parsed = {}
+    for key, value in values.items():
+        _, axis = check_axis_key(f"{prefix}{key}")
+        parse = parse_angle if axis in ANGULAR_AXES else parse_length
+        try:
+            parsed[str(key)] = parse(value)
+        except ValueError as exc:
+            raise ValueError(f"{prefix}{key}: {exc}") from None
+    return parsed
+
+
+def check_axis_key(key: str) -> tuple[str, str]:
+    """Split ``grasp.pitch`` into ("grasp", "pitch"), or raise ValueError naming the choices."""
+    frame, _, axis = key.partition(".")
+    if frame not in ("grasp", "env") or axis not in AXES:
+        raise ValueError(
+            f"unknown uncertainty axis {key!r}; use grasp.AXIS or env.AXIS with AXIS one of "
+            f"{', '.join(AXES)}"
+        )
+    return frame, axis

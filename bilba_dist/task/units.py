@@ -1,0 +1,48 @@
+"""Quantities with units in task files: lengths in m/cm/mm, angles in deg/rad.
+
+A bare number is taken in SI units (metres, radians). A string is a number followed by a unit,
+e.g. ``"2deg"``, ``"1.5 cm"``. The wrong kind of unit (``"2cm"`` for an angle) is an error.
+"""
+
+import math
+import re
+from typing import Annotated
+
+from pydantic import BeforeValidator
+
+LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z]*)\s*$")
+
+
+def parse_quantity(value: object, units: dict[str, float], kind: str) -> float:
+    """Return ``value`` in SI units; raise ValueError naming the allowed units."""
+    if isinstance(value, bool):
+        raise ValueError(f"expected a {kind}, got {value!r}")
+    if isinstance(value, int | float):
+        return float(value)
+    if not isinstance(value, str):
+        raise ValueError(f"expected a {kind} (number or string with unit), got {value!r}")
+    match = _QUANTITY.match(value)
+    if match is None:
+        raise ValueError(f"cannot read {value!r} as a {kind}; write e.g. '2{next(iter(units))}'")
+    number, unit = float(match.group(1)), match.group(2)
+    if unit == "":
+        return number
+    if unit not in units:
+        article = "an" if kind[0] in "aeiou" else "a"
+        allowed = ", ".join(sorted(units))
+        raise ValueError(f"unit {unit!r} is not {article} {kind} unit; use one of {allowed}")
+    return number * units[unit]
+
+
+def parse_length(value: object) -> float:
+    return parse_quantity(value, LENGTH_UNITS, "length")
+
+
+def parse_angle(value: object) -> float:
+    return parse_quantity(value, ANGLE_UNITS, "angle")
+
+
+Length = Annotated[float, BeforeValidator(parse_length)]
+Angle = Annotated[float, BeforeValidator(parse_angle)]

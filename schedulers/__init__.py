@@ -1,0 +1,1 @@
+"""Turning planning jobs and experiment grids into Ray work (issue 5)."""
