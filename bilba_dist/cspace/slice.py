@@ -30,9 +30,15 @@ class CObsSlice:
     @classmethod
     def build(cls, environment: Part, manipuland: Part, R_OM: np.ndarray) -> "CObsSlice":
         R_OM = np.asarray(R_OM, dtype=float)
-        polytopes = tuple(
+        polytopes = [
             minkowski_polytope(e, m, R_OM) for e in environment.pieces for m in manipuland.pieces
-        )
+        ]
+        return cls.of(R_OM, polytopes)
+
+    @classmethod
+    def of(cls, R_OM: np.ndarray, polytopes: Iterable[Polytope]) -> "CObsSlice":
+        """The union of ``polytopes`` (all at rotation ``R_OM``)."""
+        polytopes = tuple(polytopes)
         return cls(R_OM, polytopes, FacetStack(list(polytopes)))
 
     @cached_property
@@ -117,6 +123,11 @@ class CObsSlice:
             if sum(len(f) for f in found) >= n:
                 break
         return np.concatenate(found)[:n]
+
+    def mode_vertices(self, mode: ContactPair) -> np.ndarray:
+        """The boundary vertices whose contact set holds ``mode``."""
+        mask = np.array([mode in c for c in self.vertex_contacts], dtype=bool)
+        return self.vertices[mask] if len(mask) else np.zeros((0, 3))
 
     def modes(self) -> set[ContactPair]:
         return set().union(*self.vertex_contacts) if self.vertex_contacts else set()

@@ -131,6 +131,7 @@ def _name_faces(
     names = [""] * len(faces)
     for k, i in enumerate(order):
         names[i] = f"f{k}"
+    named: dict[int, str] = {}
     for label, direction in face_names.items():
         d = np.asarray(direction, dtype=float)
         if d.shape != (3,) or np.linalg.norm(d) == 0:
@@ -143,6 +144,11 @@ def _name_faces(
                 f"piece {piece!r}: no facet has the normal {d.round(4).tolist()} given for "
                 f"face {label!r}"
             )
+        if best in named:
+            raise GeometryError(
+                f"piece {piece!r}: faces {named[best]!r} and {label!r} name the same facet"
+            )
+        named[best] = label
         names[best] = label
     if len(set(names)) != len(names):
         raise GeometryError(f"piece {piece!r}: two faces share a name in {sorted(names)}")

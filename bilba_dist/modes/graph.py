@@ -129,7 +129,6 @@ def nearest_modes(
     distance = {}
     for m in modes:
         samples = cslice.sample_mode(m, NEAREST_SAMPLES, rng)
-        corners = cslice.vertices[[m in c for c in cslice.vertex_contacts]]
-        candidates = np.concatenate([samples, corners])
+        candidates = np.concatenate([samples, cslice.mode_vertices(m)])
         distance[m] = float(np.linalg.norm(candidates - point, axis=1).min())
     return sorted(modes, key=lambda m: (round(distance[m], 9), m))[:k]

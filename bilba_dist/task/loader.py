@@ -98,9 +98,13 @@ def parse_overrides(items: Iterable[str]) -> dict[str, float]:
             raise TaskError(f"--uncertainty {item!r}: write AXIS=VALUE, e.g. grasp.pitch=2deg")
         raw[key.strip()] = value.strip()
     try:
-        return parse_axis_values(raw, prefix="")
+        bounds = parse_axis_values(raw, prefix="")
     except ValueError as exc:
         raise TaskError(f"--uncertainty: {exc}") from None
+    negative = [key for key, value in bounds.items() if value < 0]
+    if negative:
+        raise TaskError(f"--uncertainty: bounds must be >= 0: {', '.join(negative)}")
+    return bounds
 
 
 def build_task(spec: TaskSpec, source: str) -> Task:

@@ -1,0 +1,30 @@
+"""Shared fixtures: the built-in tasks, and helpers to write task files."""
+
+from pathlib import Path
+
+import pytest
+import yaml
+
+from bilba_dist.task.loader import Task, builtin_tasks, load_task
+
+
+@pytest.fixture(scope="session")
+def peg() -> Task:
+    return load_task("peg-in-hole")
+
+
+@pytest.fixture(scope="session")
+def puzzle() -> Task:
+    return load_task("puzzle")
+
+
+@pytest.fixture
+def peg_yaml() -> dict:
+    """The peg-in-hole task file as plain data, to break in a test."""
+    return yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+
+
+def write_task(tmp_path: Path, data: dict | str, name: str = "task.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(data if isinstance(data, str) else yaml.safe_dump(data, sort_keys=False))
+    return path

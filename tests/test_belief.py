@@ -1,0 +1,62 @@
+import numpy as np
+import pytest
+
+from bilba_dist.belief.particles import initial_belief, random_offsets
+from bilba_dist.task.loader import build_task, load_task
+
+
+def test_axis_belief_is_nominal_plus_and_minus_n(peg):
+    particles = initial_belief(peg)
+    assert [p.offsets for p in particles] == [
+        {},
+        {"grasp.pitch": pytest.approx(np.deg2rad(2))},
+        {"grasp.pitch": pytest.approx(-np.deg2rad(2))},
+    ]
+    nominal = particles[0].X_OM(peg.X_WG0)
+    assert np.allclose(nominal.rotation, np.eye(3))
+    assert np.allclose(nominal.translation, [0, 0, 0.205])  # 0.36 - 0.155 above the table
+    tilted = particles[1].X_OM(peg.X_WG0).rotation
+    assert np.degrees(np.arccos((np.trace(tilted) - 1) / 2)) == pytest.approx(2.0)
+
+
+def test_env_offset_moves_the_environment():
+    task = load_task("peg-in-hole", ["env.y=1cm"])
+    _, plus, minus = initial_belief(task)
+    assert plus.X_WO.translation[1] == pytest.approx(0.01)
+    assert plus.X_OM(task.X_WG0).translation[1] == pytest.approx(-0.01)
+    assert minus.X_WO.translation[1] == pytest.approx(-0.01)
+
+
+def _with_belief(task, belief):
+    spec = task.spec.model_validate({**task.spec.model_dump(), "belief": belief})
+    return build_task(spec, task.source)
+
+
+def test_extremal_random_is_seeded_and_inside_the_ellipsoid():
+    task = load_task("peg-in-hole", ["grasp.x=1cm", "grasp.z=5mm", "grasp.pitch=3deg"])
+    spec = {"generator": "extremal+random", "random": 8, "seed": 7}
+    first = initial_belief(_with_belief(task, spec))
+    again = initial_belief(_with_belief(task, spec))
+    other = initial_belief(_with_belief(task, {**spec, "seed": 8}))
+    assert len(first) == 6 + 8
+    assert [p.offsets for p in first] == [p.offsets for p in again]
+    assert [p.offsets for p in first] != [p.offsets for p in other]
+    bounds = task.spec.uncertainty
+    for p in first[6:]:
+        assert sum((v / bounds[k]) ** 2 for k, v in p.offsets.items()) <= 1.0
+
+
+def test_random_offsets_fill_the_ellipsoid():
+    offsets = random_offsets({"a": 1.0, "b": 2.0}, 4000, seed=0)
+    radii = np.array([np.hypot(o["a"], o["b"] / 2) for o in offsets])
+    assert radii.max() <= 1.0
+    assert np.mean(radii < 0.5) == pytest.approx(0.25, abs=0.03)  # uniform in 2-D: r² ~ U
+
+
+def test_explicit_particles(peg):
+    belief = {
+        "generator": "explicit",
+        "particles": [{}, {"grasp": {"x": "5mm"}, "env": {"yaw": "1deg"}}],
+    }
+    _, second = initial_belief(_with_belief(peg, belief))
+    assert second.offsets == pytest.approx({"grasp.x": 0.005, "env.yaw": np.deg2rad(1)})

@@ -1,0 +1,180 @@
+"""The C-obs slice: known answers, boundary vertices against brute force, and membership
+against an independent exact collision check (coal, shipped with Pinocchio)."""
+
+from itertools import combinations
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.cspace.boundary import dedupe
+from bilba_dist.cspace.polytope import TOL
+from bilba_dist.cspace.slice import BOUNDARY, INSIDE, OUTSIDE, CObsSlice
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.piece import Part, box_piece
+from bilba_dist.geometry.pose import pose_from_xyz_rpy
+
+ENV_HALF = np.array([0.2, 0.3, 0.1])
+MANIP_HALF = np.array([0.05, 0.04, 0.03])
+
+
+def box_part(name: str, half: np.ndarray) -> Part:
+    return Part(name, (box_piece(name, 2 * half, pin.SE3.Identity()),))
+
+
+@pytest.fixture(scope="module")
+def box_slice() -> CObsSlice:
+    return CObsSlice.build(box_part("e", ENV_HALF), box_part("m", MANIP_HALF), np.eye(3))
+
+
+def test_box_in_box_slice_is_the_box_of_summed_half_extents(box_slice):
+    (polytope,) = box_slice.polytopes
+    half = ENV_HALF + MANIP_HALF
+    assert len(polytope.b) == 6
+    for normal, offset in zip(polytope.A, polytope.b, strict=True):
+        axis = int(np.argmax(np.abs(normal)))
+        assert np.allclose(np.abs(normal), np.eye(3)[axis])
+        assert offset == pytest.approx(half[axis])
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    assert np.allclose(np.sort(box_slice.vertices, axis=0), np.sort(corners * half, axis=0))
+
+
+@pytest.mark.parametrize("axis", range(3))
+@pytest.mark.parametrize("sign", [1, -1])
+def test_box_facets_are_labelled_with_the_touching_faces(box_slice, axis, sign):
+    (polytope,) = box_slice.polytopes
+    names = "xyz"[axis]
+    normal = sign * np.eye(3)[axis]
+    facet = int(np.argmax(polytope.A @ normal))
+    env_face = f"e/{'+' if sign > 0 else '-'}{names}"
+    manip_face = f"m/{'-' if sign > 0 else '+'}{names}"
+    assert polytope.labels[facet] == {ContactPair(env_face, manip_face)}
+
+
+def test_box_corner_vertex_names_three_pairs(box_slice):
+    corner = ENV_HALF + MANIP_HALF
+    (contacts,) = box_slice.contacts(corner)
+    assert contacts == {
+        ContactPair("e/+x", "m/-x"),
+        ContactPair("e/+y", "m/-y"),
+        ContactPair("e/+z", "m/-z"),
+    }
+
+
+def test_point_queries(box_slice):
+    half = ENV_HALF + MANIP_HALF
+    points = np.array([[0, 0, 0], [half[0], 0, 0], [half[0] + 1e-6, 0, 0]])
+    assert box_slice.classify(points).tolist() == [INSIDE, BOUNDARY, OUTSIDE]
+    assert box_slice.contacts(points[0]) == (frozenset(),)
+
+
+def test_mode_samples_lie_on_the_mode_and_inside_when_pushed(box_slice):
+    mode = ContactPair("e/+z", "m/-z")
+    rng = np.random.default_rng(1)
+    on = box_slice.sample_mode(mode, 50, rng)
+    assert len(on) == 50
+    assert np.allclose(on[:, 2], ENV_HALF[2] + MANIP_HALF[2])
+    assert all(mode in c for c in box_slice.contacts(on))
+    pushed = box_slice.sample_mode(mode, 50, rng, depth=1e-3)
+    assert (box_slice.classify(pushed) == INSIDE).all()
+
+
+def brute_force_vertices(cslice: CObsSlice) -> np.ndarray:
+    """Every point where three facet planes meet, on those facets, not covered: the
+    definition of a boundary vertex, enumerated over all facet triples with no pruning."""
+    owner = np.concatenate([[i] * len(p.b) for i, p in enumerate(cslice.polytopes)])
+    A = np.concatenate([p.A for p in cslice.polytopes])
+    b = np.concatenate([p.b for p in cslice.polytopes])
+    triples = np.array(list(combinations(range(len(b)), 3)))
+    normals, offsets = A[triples], b[triples]
+    ok = np.abs(np.linalg.det(normals)) > 1e-9
+    triples = triples[ok]
+    points = np.linalg.solve(normals[ok], offsets[ok][:, :, None])[:, :, 0]
+    slack = cslice.stack.slack(points)  # (N, P)
+    on_own = np.all(np.take_along_axis(slack, owner[triples], axis=1) <= TOL, axis=1)
+    uncovered = slack.min(axis=1) >= -TOL
+    return dedupe(points[on_own & uncovered])
+
+
+def assert_same_points(a: np.ndarray, b: np.ndarray) -> None:
+    assert len(a) == len(b)
+    for p in a:
+        assert np.linalg.norm(b - p, axis=1).min() < 1e-7
+
+
+@pytest.mark.parametrize("task_name", ["peg", "puzzle"])
+def test_boundary_vertices_match_brute_force(task_name, request):
+    task = request.getfixturevalue(task_name)
+    for particle in initial_belief(task)[:2]:
+        cslice = CObsSlice.build(
+            task.environment, task.manipuland, particle.X_OM(task.X_WG0).rotation
+        )
+        if task_name == "puzzle":  # 180 facets in all: brute force the pieces near the goal
+            near = [p for p in cslice.polytopes if p.env_piece in ("rail", "bar_py")]
+            cslice = CObsSlice.of(cslice.R_OM, near)
+        assert_same_points(cslice.vertices, brute_force_vertices(cslice))
+
+
+def test_peg_goal_region_has_vertices_only_where_three_polytopes_meet(peg):
+    cslice = CObsSlice.build(peg.environment, peg.manipuland, np.eye(3))
+    goal = [
+        v for v, c in zip(cslice.vertices, cslice.vertex_contacts, strict=True) if peg.goal in c
+    ]
+    assert len(goal) >= 4
+    for v in goal:  # the channel floor's corners: floor, and two walls
+        touching = [p for p in cslice.polytopes if abs((v @ p.A.T - p.b).max()) <= TOL]
+        assert len({p.env_piece for p in touching}) >= 3
+
+
+def signed_distance(task, X_OM: pin.SE3) -> float:
+    """Exact signed distance between the two parts (coal): < 0 when they overlap."""
+    request = coal.DistanceRequest()
+    best = np.inf
+    for env in task.environment.pieces:
+        env_shape = _coal_convex(env.vertices)
+        for manip in task.manipuland.pieces:
+            result = coal.DistanceResult()
+            d = coal.distance(
+                env_shape,
+                coal.Transform3s(),
+                _coal_convex(manip.vertices),
+                coal.Transform3s(X_OM.rotation, X_OM.translation),
+                request,
+                result,
+            )
+            best = min(best, d)
+    return float(best)
+
+
+def _coal_convex(vertices: np.ndarray):
+    points = coal.StdVec_Vec3s()
+    for v in vertices:
+        points.append(np.asarray(v, dtype=float))
+    return coal.Convex.convexHull(points, False, None)
+
+
+_slices: dict = {}
+
+
+@pytest.mark.parametrize("task_name", ["peg", "puzzle"])
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(
+    rpy=st.lists(st.floats(-0.1, 0.1), min_size=3, max_size=3),
+    unit=st.lists(st.floats(0, 1), min_size=3, max_size=3),
+)
+def test_slice_membership_agrees_with_exact_collision(task_name, rpy, unit, request):
+    task = request.getfixturevalue(task_name)
+    R = pose_from_xyz_rpy([0, 0, 0], rpy).rotation
+    cslice = CObsSlice.build(task.environment, task.manipuland, R)
+    lower = np.min([p.lower for p in cslice.polytopes], axis=0) - 0.01
+    upper = np.max([p.upper for p in cslice.polytopes], axis=0) + 0.01
+    position = lower + np.array(unit) * (upper - lower)
+    distance = signed_distance(task, pin.SE3(R, position))
+    (state,) = cslice.classify(position)
+    if abs(distance) < 1e-6:
+        return  # within coal's tolerance of touching: either answer is right
+    assert state == (INSIDE if distance < 0 else OUTSIDE), f"coal distance {distance}"

@@ -1,0 +1,93 @@
+import numpy as np
+import pinocchio as pin
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bilba_dist.errors import GeometryError
+from bilba_dist.geometry.piece import box_piece, convex_piece
+from bilba_dist.geometry.pose import pose_from_xyz_rpy, snap_rotation
+
+CUBE = [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]
+
+
+def test_box_has_six_named_faces_with_outward_normals():
+    box = box_piece("b", [0.2, 0.4, 0.6], pin.SE3.Identity())
+    assert sorted(f.name for f in box.faces) == sorted(
+        f"b/{n}" for n in ("+x", "-x", "+y", "-y", "+z", "-z")
+    )
+    assert np.allclose(box.face("b/+y").normal, [0, 1, 0])
+    assert box.face("b/+y").offset == pytest.approx(0.2)
+    assert len(box.vertices) == 8 and len(box.edges) == 12
+
+
+def test_coplanar_triangles_merge_into_one_face_each():
+    cube = convex_piece("c", CUBE, pin.SE3.Identity())
+    assert len(cube.faces) == 6
+    assert all(len(f.vertices) == 4 for f in cube.faces)
+    assert sorted(f.name for f in cube.faces) == [f"c/f{i}" for i in range(6)]
+
+
+def test_name_map_names_faces_by_normal():
+    cube = convex_piece("c", CUBE, pin.SE3.Identity(), {"top": [0, 0, 2], "left": [-1, 0, 0]})
+    assert np.allclose(cube.face("c/top").normal, [0, 0, 1])
+    assert np.allclose(cube.face("c/left").normal, [-1, 0, 0])
+    assert sum(f.name.startswith("c/f") for f in cube.faces) == 4
+
+
+def test_pose_moves_vertices_and_face_planes():
+    X = pose_from_xyz_rpy([1, 2, 3], [0, 0, np.pi / 2])
+    box = box_piece("b", [2, 2, 2], X)
+    face = box.face("b/+x")  # the box's +x now points along world +y
+    assert np.array_equal(face.normal, [0.0, 1.0, 0.0])  # exact: 90° rotations are snapped
+    assert face.offset == pytest.approx(3.0)
+    assert np.allclose(box.vertices.mean(axis=0), [1, 2, 3])
+
+
+@pytest.mark.parametrize(
+    ("point", "faces"),
+    [
+        ([0.5, 0.5, 1.0], {"c/top"}),
+        ([1.0, 0.5, 1.0], {"c/top", "c/right"}),
+        ([1.0, 1.0, 1.0], {"c/top", "c/right", "c/back"}),
+    ],
+)
+def test_faces_at_names_every_face_through_a_point(point, faces):
+    cube = convex_piece(
+        "c", CUBE, pin.SE3.Identity(), {"top": [0, 0, 1], "right": [1, 0, 0], "back": [0, 1, 0]}
+    )
+    assert set(cube.faces_at(np.array(point))) == faces
+
+
+@pytest.mark.parametrize(
+    ("vertices", "names", "complaint"),
+    [
+        ([*CUBE, [0.5, 0.5, 0.5]], None, "not convex"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], None, "degenerate"),
+        ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], None, "at least 4"),
+        (CUBE, {"slanted": [1, 1, 0]}, "no facet has the normal"),
+        (CUBE, {"a": [1, 0, 0], "b": [1, 0, 0]}, "name the same facet"),
+        (CUBE, {"f5": [1, 0, 0]}, "share a name"),
+    ],
+)
+def test_bad_convex_pieces_are_geometry_errors(vertices, names, complaint):
+    with pytest.raises(GeometryError, match=complaint):
+        convex_piece("p", vertices, pin.SE3.Identity(), names)
+
+
+def test_zero_sized_box_is_rejected():
+    with pytest.raises(GeometryError, match="positive"):
+        box_piece("b", [0.1, 0.0, 0.1], pin.SE3.Identity())
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-np.pi, np.pi), min_size=3, max_size=3))
+def test_rpy_poses_are_rotations(rpy):
+    R = pose_from_xyz_rpy([0, 0, 0], rpy).rotation
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(R) == pytest.approx(1.0)
+
+
+def test_snap_makes_right_angles_exact():
+    R = snap_rotation(pin.rpy.rpyToMatrix(np.array([0, 0, np.pi / 2])))
+    assert np.array_equal(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]])

@@ -1,0 +1,127 @@
+import networkx as nx
+import numpy as np
+import pytest
+
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.cspace.slice import CObsSlice
+from bilba_dist.errors import NoScheduleError
+from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.modes.graph import GraphParams, build_mode_graph, uncertainty_direction
+from bilba_dist.modes.schedule import SliceCache, belief_graph
+from bilba_dist.task.loader import load_task
+
+SETTINGS = ["grasp.pitch=2deg", "grasp.roll=2deg", "grasp.x=1cm", "env.y=1cm", "grasp.z=5mm"]
+
+
+@pytest.mark.parametrize("setting", SETTINGS)
+def test_peg_schedule_goes_through_a_chamfer_or_wall_to_the_hole_bottom(setting):
+    task = load_task("peg-in-hole", [setting])
+    _, schedule = belief_graph(task, initial_belief(task), task.X_WG0, SliceCache(task))
+    assert schedule[0] == FREE
+    assert schedule[-1] == ContactPair("floor/+z", "peg/-z")
+    middle = schedule[1:-1]
+    assert middle, "straight from free to the goal"
+    assert any(m.env.split("/")[1] in ("chamfer", "inner") for m in middle)
+
+
+def test_puzzle_schedule_reaches_the_goal(puzzle):
+    _, schedule = belief_graph(puzzle, initial_belief(puzzle), puzzle.X_WG0, SliceCache(puzzle))
+    assert schedule[0] == FREE and schedule[-1] == puzzle.goal and len(schedule) >= 3
+
+
+def test_schedule_is_deterministic(peg):
+    first = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))[1]
+    again = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))[1]
+    assert first == again
+
+
+def test_pruning_a_failed_edge_changes_the_schedule(peg):
+    graph, schedule = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))
+    seen = [schedule]
+    for _ in range(5):
+        graph.prune(schedule[0], schedule[1])
+        assert not graph.graph.has_edge(schedule[0], schedule[1])
+        try:
+            schedule = graph.schedule()
+        except NoScheduleError:
+            break
+        assert schedule not in seen
+        seen.append(schedule)
+    assert len(seen) >= 2
+
+
+def test_pruning_every_edge_out_of_free_leaves_no_schedule(peg):
+    graph, _ = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))
+    for v in list(graph.graph.successors(FREE)):
+        graph.prune(FREE, v)
+    with pytest.raises(NoScheduleError, match="no path"):
+        graph.schedule()
+
+
+def test_free_connects_to_the_nearest_modes(peg):
+    particles = initial_belief(peg)
+    graph, _ = belief_graph(peg, particles, peg.X_WG0, SliceCache(peg))
+    successors = list(graph.graph.successors(FREE))
+    assert len(successors) == peg.spec.planner.n_free
+    start = np.mean([p.X_OM(peg.X_WG0).translation for p in particles], axis=0)
+    cslice = graph.cslice
+    rng = np.random.default_rng(3)
+
+    def distance(mode):
+        points = np.concatenate([cslice.sample_mode(mode, 200, rng), cslice.mode_vertices(mode)])
+        return np.linalg.norm(points - start, axis=1).min()
+
+    chosen = max(distance(m) for m in successors)
+    others = [distance(m) for m in graph.modes if m not in successors]
+    assert chosen <= min(others) + 2e-3  # sampled distances: a few mm of slack
+
+
+def test_edge_costs_prefer_normals_along_the_uncertainty():
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    positions = np.array([p.X_OM(task.X_WG0).translation for p in initial_belief(task)])
+    u = uncertainty_direction(positions)
+    assert np.allclose(np.abs(u), [1, 0, 0])
+    cslice = CObsSlice.build(task.environment, task.manipuland, np.eye(3))
+    graph = build_mode_graph(cslice, positions, task.goal, GraphParams(delta_proj=0.1))
+    for a, b, cost in graph.graph.edges(data="cost"):
+        assert cost == pytest.approx(1 - 0.1 * abs(graph.normal(b)[0]))
+    wall = ContactPair("wall_px/inner", "peg/+x")
+    floor = task.goal
+    assert graph.graph.edges[floor, wall]["cost"] == pytest.approx(0.9)
+    assert graph.graph.edges[wall, floor]["cost"] == pytest.approx(1.0)
+
+
+def test_no_spread_gives_no_preference():
+    assert np.array_equal(uncertainty_direction(np.ones((3, 3))), np.zeros(3))
+
+
+def test_modes_need_enough_vertices_but_the_goal_is_kept(peg):
+    cslice = CObsSlice.build(peg.environment, peg.manipuland, np.eye(3))
+    positions = np.zeros((1, 3))
+    strict = build_mode_graph(cslice, positions, peg.goal, GraphParams(min_mode_vertices=1000))
+    assert strict.modes == [peg.goal]
+
+
+def test_dot_output_is_a_graph_with_every_edge(peg, tmp_path):
+    graph, _ = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))
+    dot = graph.to_dot()
+    assert dot.startswith("digraph modes {") and dot.rstrip().endswith("}")
+    assert dot.count(" -> ") == graph.graph.number_of_edges()
+
+
+def test_slices_are_cached_by_rotation(peg):
+    cache = SliceCache(peg)
+    particles = initial_belief(peg)
+    for p in particles:
+        cache.get(p.X_OM(peg.X_WG0).rotation)
+    cache.get(particles[0].X_OM(peg.X_WG0).rotation.copy())
+    assert len(cache) == 3
+
+
+def test_goal_missing_from_the_slice_is_no_schedule(peg):
+    cslice = CObsSlice.build(peg.environment, peg.manipuland, np.eye(3))
+    unreachable = ContactPair("floor/-z", "peg/+x")  # faces that never touch at this rotation
+    graph = build_mode_graph(cslice, np.zeros((1, 3)), unreachable, GraphParams())
+    with pytest.raises(NoScheduleError):
+        graph.schedule()
+    assert nx.is_directed(graph.graph)

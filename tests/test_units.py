@@ -1,0 +1,33 @@
+import math
+
+import pytest
+
+from bilba_dist.task.units import parse_angle, parse_length
+
+
+@pytest.mark.parametrize(
+    ("text", "metres"),
+    [(0.5, 0.5), ("1cm", 0.01), ("2.5 mm", 0.0025), ("-3m", -3.0), ("1e-3", 0.001), (2, 2.0)],
+)
+def test_lengths_convert_to_metres(text, metres):
+    assert parse_length(text) == pytest.approx(metres)
+
+
+@pytest.mark.parametrize(("text", "rad"), [("180deg", math.pi), ("0.1rad", 0.1), (-1, -1.0)])
+def test_angles_convert_to_radians(text, rad):
+    assert parse_angle(text) == pytest.approx(rad)
+
+
+@pytest.mark.parametrize(
+    ("parse", "text", "complaint"),
+    [
+        (parse_angle, "2cm", "not an angle unit"),
+        (parse_length, "2deg", "not a length unit"),
+        (parse_length, "two cm", "cannot read"),
+        (parse_length, True, "expected a length"),
+        (parse_length, [1], "expected a length"),
+    ],
+)
+def test_bad_quantities_name_the_problem(parse, text, complaint):
+    with pytest.raises(ValueError, match=complaint):
+        parse(text)
