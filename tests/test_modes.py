@@ -83,7 +83,7 @@ def test_edge_costs_prefer_normals_along_the_uncertainty():
     assert np.allclose(np.abs(u), [1, 0, 0])
     cslice = CObsSlice.build(task.environment, task.manipuland, np.eye(3))
     graph = build_mode_graph(cslice, positions, task.goal, GraphParams(delta_proj=0.1))
-    for a, b, cost in graph.graph.edges(data="cost"):
+    for _, b, cost in graph.graph.edges(data="cost"):
         assert cost == pytest.approx(1 - 0.1 * abs(graph.normal(b)[0]))
     wall = ContactPair("wall_px/inner", "peg/+x")
     floor = task.goal
