@@ -18,3 +18,7 @@ class GeometryError(BilbaError):
 
 class NoScheduleError(BilbaError):
     """The mode graph holds no path from the free mode to the goal contact."""
+
+
+class UnreachableError(BilbaError):
+    """A gripper setpoint has no inverse-kinematics solution within the joint limits."""

@@ -6,7 +6,7 @@ piece frame) or ``f0, f1, …`` in a fixed order (by normal, descending x, then 
 """
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pinocchio as pin
@@ -47,6 +47,8 @@ class ConvexPiece:
     vertices: np.ndarray  # (N, 3) hull vertices only [m]
     faces: tuple[Face, ...]
     edges: np.ndarray  # (E, 2) vertex index pairs
+    box_size: np.ndarray | None = None  # for boxes: full size [m], centred at X_PB
+    X_PB: pin.SE3 | None = None  # for boxes: the box centre frame in the part frame
 
     def face(self, name: str) -> Face:
         for face in self.faces:
@@ -71,7 +73,8 @@ def box_piece(name: str, size: Sequence[float], X_PB: pin.SE3) -> ConvexPiece:
     if half.shape != (3,) or np.any(half <= 0):
         raise GeometryError(f"piece {name!r}: box size must be three positive lengths, got {size}")
     corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
-    return convex_piece(name, corners * half, X_PB, BOX_FACES)
+    piece = convex_piece(name, corners * half, X_PB, BOX_FACES)
+    return replace(piece, box_size=2 * half, X_PB=X_PB.copy())
 
 
 def convex_piece(

@@ -8,6 +8,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pinocchio as pin
 from pydantic import BaseModel, ValidationError
 
@@ -126,9 +127,19 @@ def build_task(spec: TaskSpec, source: str) -> Task:
         environment=environment,
         X_GM=to_pose(spec.grasp),
         X_WO=to_pose(spec.environment_pose),
-        X_WG0=to_pose(spec.robot_start.gripper),
+        X_WG0=start_gripper_pose(spec),
         goal=goal,
     )
+
+
+def start_gripper_pose(spec: TaskSpec) -> pin.SE3:
+    """``X_WG`` at the start: as given, or the forward kinematics of the start joints."""
+    start = spec.robot_start
+    if start.gripper is not None:
+        return to_pose(start.gripper)
+    from bilba_dist.robot.panda import PandaModel  # loads the URDF: only when needed
+
+    return PandaModel().fk(np.array(start.joints))
 
 
 def to_pose(spec: PoseSpec) -> pin.SE3:

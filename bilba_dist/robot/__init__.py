@@ -1,0 +1,1 @@
+"""The Franka Panda: kinematics and dynamics terms from Pinocchio, IK."""

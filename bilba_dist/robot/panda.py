@@ -1,0 +1,101 @@
+"""The Franka Panda of pybullet_data, in Pinocchio: FK, Jacobian, gravity, and IK.
+
+The finger joints are locked (the gripper holds the part rigidly) and the manipuland's mass
+is added to the last link at its grasp, so gravity compensation includes the part. Frames:
+``G`` is ``panda_hand``; the robot base is the world origin. Units: m, rad, kg, N·m.
+"""
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import pybullet_data
+
+from bilba_dist.errors import UnreachableError
+
+ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
+FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
+HAND = "panda_hand"
+#: Torque limits of the seven arm joints [N·m] (Franka's datasheet; DESIGN.md).
+TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
+#: A comfortable mid-range posture: the IK's joint-centring target.
+Q_CENTRE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
+
+
+def panda_urdf() -> str:
+    return os.path.join(pybullet_data.getDataPath(), "franka_panda", "panda.urdf")
+
+
+@dataclass(frozen=True)
+class IKSettings:
+    damping: float = 1e-4  # damped least squares λ²
+    centring: float = 0.05  # weight of the pull towards Q_CENTRE in the null space
+    centring_until: float = 1e-3  # drop the pull below this error, to converge exactly
+    max_iterations: int = 200
+    tolerance: float = 1e-5  # norm of the 6-D error [m, rad]
+    step: float = 1.0
+
+
+class PandaModel:
+    """Pinocchio model of the arm with the fingers locked and an optional payload."""
+
+    def __init__(
+        self,
+        payload_mass: float = 0.0,
+        X_GM: pin.SE3 | None = None,
+        com_M: np.ndarray | None = None,
+    ) -> None:
+        full = pin.buildModelFromUrdf(panda_urdf())
+        locked = [full.getJointId(name) for name in FINGER_JOINTS]
+        self.model = pin.buildReducedModel(full, locked, pin.neutral(full))
+        self.hand = self.model.getFrameId(HAND)
+        if payload_mass > 0:
+            X_GM = X_GM if X_GM is not None else pin.SE3.Identity()
+            self._add_payload(payload_mass, X_GM, np.zeros(3) if com_M is None else com_M)
+        self.data = self.model.createData()
+        self.lower = self.model.lowerPositionLimit.copy()
+        self.upper = self.model.upperPositionLimit.copy()
+
+    def _add_payload(self, mass: float, X_GM: pin.SE3, com_M: np.ndarray) -> None:
+        frame = self.model.frames[self.hand]
+        X_JM = frame.placement * X_GM  # the part's frame in the last joint's frame
+        inertia = pin.Inertia(mass, X_JM.act(np.asarray(com_M, dtype=float)), np.eye(3) * 1e-4)
+        self.model.inertias[frame.parentJoint] += inertia
+
+    def fk(self, q: np.ndarray) -> pin.SE3:
+        """``X_WG``: the hand in the world."""
+        pin.framesForwardKinematics(self.model, self.data, np.asarray(q, dtype=float))
+        return self.data.oMf[self.hand].copy()
+
+    def jacobian_and_gravity(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The hand's 6×7 Jacobian, rotation rows first, world-aligned; and g(q)."""
+        pin.computeJointJacobians(self.model, self.data, q)
+        pin.updateFramePlacements(self.model, self.data)
+        J = pin.getFrameJacobian(self.model, self.data, self.hand, pin.LOCAL_WORLD_ALIGNED)
+        g = pin.computeGeneralizedGravity(self.model, self.data, q)
+        return np.vstack([J[3:], J[:3]]), g
+
+    def ik(
+        self, X_WG: pin.SE3, q_seed: np.ndarray, settings: IKSettings = IKSettings()
+    ) -> np.ndarray:
+        """Joint angles putting the hand at ``X_WG``: damped least squares with a pull
+        towards the centre posture in the null space, clipped to the joint limits."""
+        q = np.clip(np.asarray(q_seed, dtype=float), self.lower, self.upper)
+        eye = np.eye(6)
+        for _ in range(settings.max_iterations):
+            pin.framesForwardKinematics(self.model, self.data, q)
+            error = pin.log6(self.data.oMf[self.hand].actInv(X_WG)).vector  # local frame
+            if np.linalg.norm(error) < settings.tolerance:
+                return q
+            J = pin.computeFrameJacobian(self.model, self.data, q, self.hand, pin.LOCAL)
+            JJt = J @ J.T + settings.damping * eye
+            J_pinv = J.T @ np.linalg.solve(JJt, eye)
+            dq = J_pinv @ error
+            if np.linalg.norm(error) > settings.centring_until:  # damped J⁺ leaks: stop
+                dq += settings.centring * (np.eye(7) - J_pinv @ J) @ (Q_CENTRE - q)
+            q = np.clip(q + settings.step * dq, self.lower, self.upper)
+        raise UnreachableError(
+            f"no IK solution for the gripper at {np.round(X_WG.translation, 4).tolist()} m "
+            f"(error {np.linalg.norm(error):.2g} after {settings.max_iterations} iterations)"
+        )

@@ -1,0 +1,88 @@
+"""The rollout interface: the only way the planner reaches a simulator.
+
+The planner builds `RolloutRequest`s — one particle, its current state, one compliant
+motion — and hands batches to a `RolloutBackend`; results come back in request order.
+`workers/` implements the backend in-process and on Ray; nothing here imports pybullet.
+"""
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Literal, Protocol
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.belief.particles import Particle
+from bilba_dist.geometry.contact import ContactSet
+
+DynamicsModel = Literal["panda", "floating"]
+
+
+def _frozen(array: np.ndarray | Sequence[float] | None, shape: tuple[int, ...]) -> np.ndarray:
+    a = np.array(array if array is not None else np.zeros(shape), dtype=float)
+    if a.shape != shape:
+        raise ValueError(f"expected shape {shape}, got {a.shape}")
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A compliant motion ``u = (K, G_d)`` run for ``timeout_s``: ``K`` is the 6×6 Cartesian
+    stiffness at the gripper, rotation first [N·m/rad, N/m], in world axes; ``G_d`` the
+    gripper setpoint ``X_WG`` at the end of the ramp."""
+
+    K: np.ndarray
+    G_d: pin.SE3
+    timeout_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        K = _frozen(self.K, (6, 6))
+        if not np.allclose(K, K.T, atol=1e-9) or np.linalg.eigvalsh(K).min() < -1e-9:
+            raise ValueError("stiffness K must be symmetric positive semi-definite")
+        object.__setattr__(self, "K", K)
+        if self.timeout_s <= 0:
+            raise ValueError(f"timeout must be positive, got {self.timeout_s}")
+
+
+@dataclass(frozen=True)
+class ParticleState:
+    """Where one particle's robot is: arm joints (Panda model) and the manipuland's pose and
+    twist in the world (both models; the floating model moves only these)."""
+
+    X_WM: pin.SE3
+    q: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    dq: np.ndarray = field(default_factory=lambda: np.zeros(7))
+    V_WM: np.ndarray = field(default_factory=lambda: np.zeros(6))  # angular, linear [world]
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "q", _frozen(self.q, (7,)))
+        object.__setattr__(self, "dq", _frozen(self.dq, (7,)))
+        object.__setattr__(self, "V_WM", _frozen(self.V_WM, (6,)))
+
+
+@dataclass(frozen=True)
+class RolloutRequest:
+    particle: Particle
+    state: ParticleState
+    motion: Motion
+
+
+@dataclass(frozen=True)
+class RolloutResult:
+    """The end of one rollout: the new state, the contact set ``D(q)``, the joint setpoint
+    ``q_d`` the motion used (Panda model), simulated time, and whether it stopped early
+    because everything had settled."""
+
+    state: ParticleState
+    contacts: ContactSet
+    q_d: np.ndarray
+    sim_time_s: float
+    settled: bool
+    reachable: bool = True
+
+
+class RolloutBackend(Protocol):
+    """Simulate (particle, motion) pairs; results in request order."""
+
+    def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]: ...

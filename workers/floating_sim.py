@@ -1,0 +1,159 @@
+"""The floating model: the manipuland as a free body, pulled by the same 6-D spring–damper
+that the Panda's controller applies at the gripper, with gravity compensated exactly.
+
+It has a virtual inertia near the Panda's effective one (its real 1e-4 kg·m² with rotational
+damping blows up under explicit integration: PHYSICS.md). Faster than the Panda model; plans
+made with it must be validated on the Panda model before they are returned.
+"""
+
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pybullet as p
+
+from bilba_dist.geometry.piece import Part
+from bilba_dist.rollout import Motion, ParticleState, RolloutResult
+from bilba_dist.task.loader import Task
+from workers.motion import clip_norm, damping, label_final_contacts, ramp_steps
+from workers.scene import EnvironmentBodies, connect, quat_xyzw
+from workers.settings import SimSettings
+from workers.urdf import write_obj
+
+
+def part_compound(part: Part, client: int) -> int:
+    """One collision shape of all the part's pieces, in the part frame (boxes exact)."""
+    kinds, halves, files, positions, orientations = [], [], [], [], []
+    with tempfile.TemporaryDirectory(prefix="bilba_part_") as folder:
+        for piece in part.pieces:
+            X = piece.X_PB if piece.X_PB is not None else pin.SE3.Identity()
+            if piece.box_size is not None:
+                kinds.append(p.GEOM_BOX)
+                halves.append((piece.box_size / 2).tolist())
+                files.append("")
+            else:
+                path = Path(folder) / f"{piece.name}.obj"
+                write_obj(piece.vertices, path)
+                kinds.append(p.GEOM_MESH)
+                halves.append([0.0, 0.0, 0.0])
+                files.append(str(path))
+            positions.append(X.translation.tolist())
+            orientations.append(quat_xyzw(X.rotation))
+        return p.createCollisionShapeArray(
+            kinds,
+            halfExtents=halves,
+            fileNames=files,
+            collisionFramePositions=positions,
+            collisionFrameOrientations=orientations,
+            physicsClientId=client,
+        )
+
+
+class FloatingSim:
+    """A PyBullet world with the environment and the manipuland as one free body."""
+
+    def __init__(self, task: Task, settings: SimSettings) -> None:
+        self.task, self.settings = task, settings
+        self.client = connect(settings.timestep_s, 0.0)
+        compound = part_compound(task.manipuland, self.client)
+        self.body = p.createMultiBody(
+            settings.virtual_mass_kg, compound, -1, physicsClientId=self.client
+        )
+        inertia = [settings.virtual_inertia_kg_m2] * 3
+        p.changeDynamics(
+            self.body,
+            -1,
+            lateralFriction=1.0,
+            collisionMargin=0.0,
+            localInertiaDiagonal=inertia,
+            linearDamping=0.0,
+            angularDamping=0.0,
+            physicsClientId=self.client,
+        )
+        self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
+        self.clean = p.saveState(physicsClientId=self.client)
+
+    def close(self) -> None:
+        p.disconnect(physicsClientId=self.client)
+
+    def reset(self, X_WO: pin.SE3, X_WM: pin.SE3, V_WM: np.ndarray) -> None:
+        p.restoreState(self.clean, physicsClientId=self.client)
+        self.env.place(X_WO)
+        p.resetBasePositionAndOrientation(
+            self.body,
+            X_WM.translation.tolist(),
+            quat_xyzw(X_WM.rotation),
+            physicsClientId=self.client,
+        )
+        p.resetBaseVelocity(
+            self.body, V_WM[3:].tolist(), V_WM[:3].tolist(), physicsClientId=self.client
+        )
+
+    def read(self) -> tuple[pin.SE3, np.ndarray]:
+        position, orientation = p.getBasePositionAndOrientation(
+            self.body, physicsClientId=self.client
+        )
+        linear, angular = p.getBaseVelocity(self.body, physicsClientId=self.client)
+        X_WM = pin.XYZQUATToSE3(np.array([*position, *orientation]))
+        return X_WM, np.array([*angular, *linear])
+
+    def rollout(
+        self, X_WO: pin.SE3, X_GM: pin.SE3, start: ParticleState, motion: Motion
+    ) -> RolloutResult:
+        self.reset(X_WO, start.X_WM, start.V_WM)
+        steps, settled = self._run(X_GM, start.X_WM * X_GM.inverse(), motion)
+        X_WM, V_WM = self.read()
+        contacts = label_final_contacts(
+            self.env,
+            self.task.manipuland,
+            X_WO,
+            X_WM,
+            self.body,
+            -1,
+            self.settings.contact_distance_m,
+        )
+        state = ParticleState(X_WM=X_WM, V_WM=V_WM, q=start.q)
+        return RolloutResult(state, contacts, start.q, steps * self.settings.timestep_s, settled)
+
+    def _run(self, X_GM: pin.SE3, X_WG0: pin.SE3, motion: Motion) -> tuple[int, bool]:
+        s = self.settings
+        K, B = motion.K, damping(motion.K)
+        X_MG = X_GM.inverse()
+        delta = pin.log6(X_WG0.actInv(motion.G_d))
+        n_ramp = ramp_steps(X_WG0, motion.G_d, s)
+        n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
+        n_window = math.ceil(s.settle_window_s / s.timestep_s)
+        still = 0
+        for k in range(n_max):
+            X_WM, V = self.read()
+            X_WG = X_WM * X_MG
+            X_ref = X_WG0 * pin.exp6(delta * min(1.0, (k + 1) / n_ramp))
+            r_MG = X_WG.translation - X_WM.translation
+            v_G = V[3:] + np.cross(V[:3], r_MG)
+            error = np.concatenate(
+                [pin.log3(X_ref.rotation @ X_WG.rotation.T), X_ref.translation - X_WG.translation]
+            )
+            wrench = clip_norm(K @ error, s.spring_limit) - B @ np.concatenate([V[:3], v_G])
+            p.applyExternalForce(
+                self.body,
+                -1,
+                wrench[3:].tolist(),
+                X_WG.translation.tolist(),
+                p.WORLD_FRAME,
+                physicsClientId=self.client,
+            )
+            p.applyExternalTorque(
+                self.body, -1, wrench[:3].tolist(), p.WORLD_FRAME, physicsClientId=self.client
+            )
+            p.stepSimulation(physicsClientId=self.client)
+            if s.early_stop and k + 1 >= n_ramp:
+                calm = (
+                    np.linalg.norm(V[3:]) < s.settle_speed_m_s
+                    and np.linalg.norm(V[:3]) < s.settle_speed_rad_s
+                )
+                still = still + 1 if calm else 0
+                if still >= n_window:
+                    return k + 1, True
+        return n_max, False

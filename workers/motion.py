@@ -1,0 +1,62 @@
+"""Pieces both dynamics models share: damping from stiffness, the setpoint ramp, the
+settling test, and labelling the final contacts."""
+
+import math
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.geometry.contact import ContactSet
+from bilba_dist.geometry.labels import label_points
+from bilba_dist.geometry.piece import Part
+from workers.scene import EnvironmentBodies
+from workers.settings import SimSettings
+
+
+def damping(K: np.ndarray) -> np.ndarray:
+    """``B = 2√K``: the symmetric square root of the stiffness, doubled."""
+    w, V = np.linalg.eigh(K)
+    return 2.0 * (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
+
+
+def ramp_steps(X_start: pin.SE3, X_goal: pin.SE3, settings: SimSettings) -> int:
+    """Steps over which the setpoint moves from ``X_start`` to ``X_goal``."""
+    delta = pin.log6(X_start.actInv(X_goal))
+    seconds = max(
+        float(np.linalg.norm(delta.linear)) / settings.ramp_speed_m_s,
+        float(np.linalg.norm(delta.angular)) / settings.ramp_speed_rad_s,
+        settings.min_ramp_s,
+    )
+    return max(1, math.ceil(seconds / settings.timestep_s))
+
+
+def clip_norm(f: np.ndarray, limit: float) -> np.ndarray:
+    norm = float(np.linalg.norm(f))
+    return f * (limit / norm) if norm > limit else f
+
+
+def label_final_contacts(
+    env: EnvironmentBodies,
+    manipuland: Part,
+    X_WO: pin.SE3,
+    X_WM: pin.SE3,
+    body: int,
+    link: int,
+    distance: float,
+) -> ContactSet:
+    """The contact set between the manipuland (``body``/``link``) and the environment."""
+    by_piece: dict[int, list] = {}
+    for piece, on_env, on_part, normal in env.contact_points(body, link, distance):
+        by_piece.setdefault(piece, []).append((on_env, on_part, normal))
+    contacts: set = set()
+    for piece, rows in by_piece.items():
+        on_env, on_part, normal = (np.array(col) for col in zip(*rows, strict=True))
+        contacts |= label_points(
+            env.part.pieces[piece],
+            manipuland,
+            (on_env - X_WO.translation) @ X_WO.rotation,
+            normal @ X_WO.rotation,
+            (on_part - X_WM.translation) @ X_WM.rotation,
+            X_WO.rotation.T @ X_WM.rotation,
+        )
+    return frozenset(contacts)

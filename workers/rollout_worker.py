@@ -1,0 +1,88 @@
+"""`RolloutWorker`: simulates (particle, motion) pairs, keeping its PyBullet worlds alive.
+
+One worker holds, for the current task, a Panda world per distinct grasp ``X_GM`` (the
+grasp is built into the robot's URDF) and one floating world; each rollout only resets
+state. The worlds are rebuilt only when the task's geometry changes. The same class runs
+in-process and as a Ray actor (``ray.remote(RolloutWorker)``); a Ray actor gets its task
+as a `TaskSpec`, which pickles, and builds its worlds in its own process.
+"""
+
+from collections.abc import Sequence
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
+from bilba_dist.task.loader import Task, build_task
+from bilba_dist.task.schema import TaskSpec
+from workers.floating_sim import FloatingSim
+from workers.panda_sim import PandaSim
+from workers.settings import SimSettings
+
+
+def grasp_key(X_GM: pin.SE3) -> bytes:
+    return np.round(X_GM.homogeneous, 12).tobytes()
+
+
+class RolloutWorker:
+    """Implements `bilba_dist.rollout.RolloutBackend` for one task at a time."""
+
+    def __init__(
+        self,
+        task: Task | TaskSpec,
+        model: DynamicsModel = "panda",
+        settings: SimSettings | None = None,
+    ) -> None:
+        self.model = model
+        self.settings = settings or SimSettings()
+        self._panda: dict[bytes, PandaSim] = {}
+        self._floating: FloatingSim | None = None
+        self.task = self._as_task(task)
+        self.rollouts = 0
+
+    @staticmethod
+    def _as_task(task: Task | TaskSpec) -> Task:
+        return task if isinstance(task, Task) else build_task(task, task.name)
+
+    def set_task(self, task: Task | TaskSpec) -> None:
+        """Switch task; worlds are rebuilt only if the geometry or friction changed."""
+        new = self._as_task(task)
+        if _geometry(new.spec) != _geometry(self.task.spec):
+            self.close()
+        self.task = new
+
+    def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
+        results = [self._one(r) for r in requests]
+        self.rollouts += len(results)
+        return results
+
+    def _one(self, request: RolloutRequest) -> RolloutResult:
+        particle = request.particle
+        if self.model == "floating":
+            return self._floating_sim().rollout(
+                particle.X_WO, particle.X_GM, request.state, request.motion
+            )
+        return self.panda_sim(particle.X_GM).rollout(particle.X_WO, request.state, request.motion)
+
+    def panda_sim(self, X_GM: pin.SE3) -> PandaSim:
+        key = grasp_key(X_GM)
+        if key not in self._panda:
+            self._panda[key] = PandaSim(self.task, X_GM, self.settings)
+        return self._panda[key]
+
+    def _floating_sim(self) -> FloatingSim:
+        if self._floating is None:
+            self._floating = FloatingSim(self.task, self.settings)
+        return self._floating
+
+    def close(self) -> None:
+        for sim in self._panda.values():
+            sim.close()
+        self._panda.clear()
+        if self._floating is not None:
+            self._floating.close()
+            self._floating = None
+
+
+def _geometry(spec: TaskSpec) -> tuple:
+    return (spec.manipuland, spec.environment, spec.friction)

@@ -1,0 +1,88 @@
+"""One PyBullet world: the environment's pieces as static bodies, and either the Panda holding
+the manipuland or the manipuland floating free.
+
+Each environment piece is its own body so its collision margin can be zeroed (the margin acts
+on a body's base only): a 5 mm clearance then really is 5 mm. Friction: the environment
+carries the task's μ and everything else 1, since PyBullet multiplies the two.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+import pybullet as p
+
+from bilba_dist.geometry.piece import ConvexPiece, Part
+
+
+def connect(timestep_s: float, gravity: float) -> int:
+    """A new DIRECT client with the given step; always pass its id on."""
+    client = p.connect(p.DIRECT)
+    p.setTimeStep(timestep_s, physicsClientId=client)
+    p.setGravity(0, 0, gravity, physicsClientId=client)
+    p.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=client)
+    return client
+
+
+def quat_xyzw(R: np.ndarray) -> list[float]:
+    return list(pin.Quaternion(np.asarray(R)).coeffs())  # x, y, z, w
+
+
+def piece_shape(piece: ConvexPiece, client: int) -> tuple[int, pin.SE3]:
+    """A collision shape for ``piece`` and the pose of its frame in the part frame."""
+    if piece.box_size is not None and piece.X_PB is not None:
+        shape = p.createCollisionShape(
+            p.GEOM_BOX, halfExtents=list(piece.box_size / 2), physicsClientId=client
+        )
+        return shape, piece.X_PB
+    shape = p.createCollisionShape(
+        p.GEOM_MESH, vertices=piece.vertices.tolist(), physicsClientId=client
+    )
+    return shape, pin.SE3.Identity()
+
+
+@dataclass
+class EnvironmentBodies:
+    """The environment's static bodies; `place` moves them all to a new ``X_WO``."""
+
+    client: int
+    part: Part
+    bodies: list[int]
+    offsets: list[pin.SE3]  # each piece body's frame in the part frame
+
+    @classmethod
+    def create(cls, part: Part, friction: float, client: int) -> "EnvironmentBodies":
+        bodies, offsets = [], []
+        for piece in part.pieces:
+            shape, X_OP = piece_shape(piece, client)
+            body = p.createMultiBody(0.0, shape, -1, physicsClientId=client)
+            p.changeDynamics(
+                body, -1, lateralFriction=friction, collisionMargin=0.0, physicsClientId=client
+            )
+            bodies.append(body)
+            offsets.append(X_OP)
+        return cls(client, part, bodies, offsets)
+
+    def place(self, X_WO: pin.SE3) -> None:
+        for body, X_OP in zip(self.bodies, self.offsets, strict=True):
+            X_WP = X_WO * X_OP
+            p.resetBasePositionAndOrientation(
+                body,
+                X_WP.translation.tolist(),
+                quat_xyzw(X_WP.rotation),
+                physicsClientId=self.client,
+            )
+
+    def contact_points(
+        self, body: int, link: int, distance: float
+    ) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+        """(piece index, point on env [world], point on body [world], normal env→body) for
+        every pair of points within ``distance`` [m] of the environment."""
+        found = []
+        for i, env_body in enumerate(self.bodies):
+            for c in p.getClosestPoints(
+                env_body, body, distance, linkIndexB=link, physicsClientId=self.client
+            ):
+                # c[5]: on A (env), c[6]: on B, c[7]: normal from B to A
+                found.append((i, np.array(c[5]), np.array(c[6]), -np.array(c[7])))
+        return found

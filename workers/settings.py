@@ -1,0 +1,24 @@
+"""Numbers of the simulated controllers, with their units. Defaults follow DESIGN.md and the
+measurements in PHYSICS.md."""
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SimSettings:
+    timestep_s: float = 1 / 240
+    contact_distance_m: float = 0.001  # a pair closer than this is in contact
+    spring_limit: float = 20.0  # norm clip of the 6-D spring wrench [N, N·m]
+    ramp_speed_m_s: float = 0.1  # setpoint ramp: translation speed ...
+    ramp_speed_rad_s: float = 0.5  # ... and rotation speed; the slower one sets the time
+    min_ramp_s: float = 0.2
+    settle_window_s: float = 0.25  # stop once still this long after the ramp ends
+    settle_joint_speed: float = 2e-3  # "still" for the Panda: every |dq| below [rad/s]
+    settle_speed_m_s: float = 1e-3  # "still" for the floating part [m/s] ...
+    settle_speed_rad_s: float = 1e-2  # ... and [rad/s]
+    early_stop: bool = True
+    null_stiffness: float = 10.0  # posture spring in the null space [N·m/rad]
+    null_damping: float = 1.0  # [N·m·s/rad]
+    virtual_mass_kg: float = 8.0  # floating model: the Panda hand's effective inertia
+    # (task-space Λ at the peg start: 6–10 kg, 0.6–1.2 kg·m²); too little is unstable
+    virtual_inertia_kg_m2: float = 0.8
