@@ -8,6 +8,7 @@ made with it must be validated on the Panda model before they are returned.
 
 import math
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ import pybullet as p
 from bilba_dist.geometry.piece import Part
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.motion import clip_norm, damping, label_final_contacts, ramp_steps
+from workers.motion import SimStats, damping, label_final_contacts, ramp_steps
 from workers.scene import EnvironmentBodies, connect, quat_xyzw
 from workers.settings import SimSettings
 from workers.urdf import write_obj
@@ -74,6 +75,7 @@ class FloatingSim:
         )
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
         self.clean = p.saveState(physicsClientId=self.client)
+        self.stats = SimStats()
 
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
@@ -118,42 +120,58 @@ class FloatingSim:
         return RolloutResult(state, contacts, start.q, steps * self.settings.timestep_s, settled)
 
     def _run(self, X_GM: pin.SE3, X_WG0: pin.SE3, motion: Motion) -> tuple[int, bool]:
-        s = self.settings
+        s, body, client = self.settings, self.body, self.client
         K, B = motion.K, damping(motion.K)
-        X_MG = X_GM.inverse()
-        delta = pin.log6(X_WG0.actInv(motion.G_d))
+        p_MG, R_MG = X_GM.inverse().translation, X_GM.inverse().rotation
         n_ramp = ramp_steps(X_WG0, motion.G_d, s)
+        ramp_R, ramp_p = ramp_poses(X_WG0, motion.G_d, n_ramp)
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
-        still = 0
+        world, step, timer, log3 = p.WORLD_FRAME, p.stepSimulation, time.perf_counter, pin.log3
+        still, physics, limit = 0, 0.0, s.spring_limit
+        error, velocity = np.empty(6), np.empty(6)
         for k in range(n_max):
-            X_WM, V = self.read()
-            X_WG = X_WM * X_MG
-            X_ref = X_WG0 * pin.exp6(delta * min(1.0, (k + 1) / n_ramp))
-            r_MG = X_WG.translation - X_WM.translation
-            v_G = V[3:] + np.cross(V[:3], r_MG)
-            error = np.concatenate(
-                [pin.log3(X_ref.rotation @ X_WG.rotation.T), X_ref.translation - X_WG.translation]
-            )
-            wrench = clip_norm(K @ error, s.spring_limit) - B @ np.concatenate([V[:3], v_G])
-            p.applyExternalForce(
-                self.body,
-                -1,
-                wrench[3:].tolist(),
-                X_WG.translation.tolist(),
-                p.WORLD_FRAME,
-                physicsClientId=self.client,
-            )
-            p.applyExternalTorque(
-                self.body, -1, wrench[:3].tolist(), p.WORLD_FRAME, physicsClientId=self.client
-            )
-            p.stepSimulation(physicsClientId=self.client)
+            position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=client)
+            linear, angular = p.getBaseVelocity(body, physicsClientId=client)
+            R_WM = np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)
+            r = R_WM @ p_MG  # from the part's origin to the gripper point, world
+            p_G = np.asarray(position) + r
+            i = min(k, n_ramp - 1)
+            error[:3] = log3(ramp_R[i] @ (R_WM @ R_MG).T)
+            error[3:] = ramp_p[i] - p_G
+            velocity[:3] = angular
+            wx, wy, wz = angular
+            rx, ry, rz = r
+            velocity[3] = linear[0] + wy * rz - wz * ry  # v + ω × r, without np.cross's cost
+            velocity[4] = linear[1] + wz * rx - wx * rz
+            velocity[5] = linear[2] + wx * ry - wy * rx
+            spring = K @ error
+            norm = math.sqrt(spring @ spring)
+            if norm > limit:
+                spring *= limit / norm
+            wrench = spring - B @ velocity
+            p.applyExternalForce(body, -1, wrench[3:], p_G, world, physicsClientId=client)
+            p.applyExternalTorque(body, -1, wrench[:3], world, physicsClientId=client)
+            t0 = timer()
+            step(physicsClientId=client)
+            physics += timer() - t0
             if s.early_stop and k + 1 >= n_ramp:
                 calm = (
-                    np.linalg.norm(V[3:]) < s.settle_speed_m_s
-                    and np.linalg.norm(V[:3]) < s.settle_speed_rad_s
+                    linear[0] ** 2 + linear[1] ** 2 + linear[2] ** 2 < s.settle_speed_m_s**2
+                    and angular[0] ** 2 + angular[1] ** 2 + angular[2] ** 2
+                    < s.settle_speed_rad_s**2
                 )
                 still = still + 1 if calm else 0
                 if still >= n_window:
+                    self.stats.add(k + 1, physics)
                     return k + 1, True
+        self.stats.add(n_max, physics)
         return n_max, False
+
+
+def ramp_poses(X_start: pin.SE3, X_goal: pin.SE3, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The setpoint at each of ``n`` ramp steps, along the SE(3) geodesic: (n, 3, 3)
+    rotations and (n, 3) positions, ending at ``X_goal``."""
+    delta = pin.log6(X_start.actInv(X_goal)).vector
+    poses = [X_start * pin.exp6((k + 1) / n * delta) for k in range(n)]
+    return np.array([X.rotation for X in poses]), np.array([X.translation for X in poses])

@@ -2,6 +2,7 @@
 settling test, and labelling the final contacts."""
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -11,6 +12,20 @@ from bilba_dist.geometry.labels import label_points
 from bilba_dist.geometry.piece import Part
 from workers.scene import EnvironmentBodies
 from workers.settings import SimSettings
+
+
+@dataclass
+class SimStats:
+    """Where a world's time went: steps taken, seconds inside stepSimulation, rollouts."""
+
+    steps: int = 0
+    physics_s: float = 0.0
+    rollouts: int = 0
+
+    def add(self, steps: int, physics_s: float) -> None:
+        self.steps += steps
+        self.physics_s += physics_s
+        self.rollouts += 1
 
 
 def damping(K: np.ndarray) -> np.ndarray:

@@ -7,6 +7,8 @@ setpoint ``q_d`` (IK of ``G_d``) is approached along a straight joint-space ramp
 
 import math
 import shutil
+import time
+from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
@@ -16,10 +18,49 @@ from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.motion import clip_norm, damping, label_final_contacts, ramp_steps
+from workers.motion import SimStats, damping, label_final_contacts, ramp_steps
 from workers.scene import EnvironmentBodies, connect
 from workers.settings import SimSettings
 from workers.urdf import PART_LINK, panda_with_part, part_centre
+
+
+@dataclass(frozen=True)
+class JointImpedance:
+    """The motion's Cartesian impedance as constant joint-space gains, linearised once per
+    motion at the joint setpoint: ``K_q = Jᵀ K J + k_n N``, ``B_q = Jᵀ B J + d_n N`` with
+    ``N`` the null-space projector of J there (the posture term: the redundant arm does not
+    drift). The spring wrench ``K J (q_ref − q)`` is clipped in norm before mapping back.
+
+    One 13×14 product per step gives both the wrench (to test the clip) and the torque."""
+
+    gains: np.ndarray  # [[K J, 0], [K_q, -B_q]] acting on [e; q̇]
+    Jt: np.ndarray  # Jᵀ, 7×6
+    K_null: np.ndarray  # k_n N, 7×7
+    B_q: np.ndarray  # Jᵀ B J + d_n N, 7×7
+    limit: float
+
+    @classmethod
+    def at(
+        cls, model: PandaModel, q_d: np.ndarray, K: np.ndarray, s: SimSettings
+    ) -> "JointImpedance":
+        J, _ = model.jacobian_and_gravity(q_d)
+        N = np.eye(7) - J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), J)
+        KJ, K_null = K @ J, s.null_stiffness * N
+        B_q = J.T @ damping(K) @ J + s.null_damping * N
+        gains = np.block([[KJ, np.zeros((6, 7))], [J.T @ KJ + K_null, -B_q]])
+        return cls(gains, J.T.copy(), K_null, B_q, s.spring_limit)
+
+    def torque(self, state: np.ndarray, g: np.ndarray) -> np.ndarray:
+        """``τ = Jᵀ clip(K J e) + k_n N e − B_q q̇ + g`` for ``state = [e; q̇]``, within the
+        torque limits."""
+        out = self.gains @ state
+        wrench, tau = out[:6], out[6:]
+        norm = math.sqrt(wrench @ wrench)
+        if norm > self.limit:  # rare: only far from the setpoint
+            error, dq = state[:7], state[7:]
+            wrench *= self.limit / norm
+            tau = self.Jt @ wrench + self.K_null @ error - self.B_q @ dq
+        return np.minimum(np.maximum(tau + g, -TORQUE_LIMITS), TORQUE_LIMITS)
 
 
 class PandaSim:
@@ -56,6 +97,7 @@ class PandaSim:
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
         self.model = PandaModel(mass, X_GM, part_centre(task.manipuland))
         self.clean = p.saveState(physicsClientId=self.client)
+        self.stats = SimStats()
 
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
@@ -92,30 +134,34 @@ class PandaSim:
         return self._result(X_WO, q_d, steps * self.settings.timestep_s, settled, True)
 
     def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool]:
-        s = self.settings
-        K, B = motion.K, damping(motion.K)
+        s, client, robot, joints = self.settings, self.client, self.robot, self.joints
+        gains = JointImpedance.at(self.model, q_d, motion.K, s)
         n_ramp = ramp_steps(self.model.fk(q0), motion.G_d, s)
+        ramp = q0 + np.minimum(1.0, np.arange(1, n_ramp + 1) / n_ramp)[:, None] * (q_d - q0)
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
-        eye6, eye7 = np.eye(6), np.eye(7)
-        still = 0
+        model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
+        torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
+        still, physics, calm = 0, 0.0, s.settle_joint_speed
+        q, state = np.empty(7), np.empty(14)  # state = [q_ref - q; q̇]
         for k in range(n_max):
-            q, dq = self.read()
-            J, g = self.model.jacobian_and_gravity(q)
-            q_ref = q0 + min(1.0, (k + 1) / n_ramp) * (q_d - q0)
-            error = q_ref - q
-            wrench = clip_norm(K @ (J @ error), s.spring_limit) - B @ (J @ dq)
-            null = eye7 - J.T @ np.linalg.solve(J @ J.T + 1e-6 * eye6, J)
-            tau = J.T @ wrench + g + null @ (s.null_stiffness * error - s.null_damping * dq)
-            tau = np.clip(tau, -TORQUE_LIMITS, TORQUE_LIMITS)
+            states = p.getJointStates(robot, joints, physicsClientId=client)
+            q[:] = [st[0] for st in states]
+            state[7:] = [st[1] for st in states]
+            state[:7] = ramp[min(k, n_ramp - 1)] - q
+            tau = gains.torque(state, gravity(model, data, q))
             p.setJointMotorControlArray(
-                self.robot, self.joints, p.TORQUE_CONTROL, forces=tau, physicsClientId=self.client
+                robot, joints, torque_control, forces=tau, physicsClientId=client
             )
-            p.stepSimulation(physicsClientId=self.client)
+            t0 = timer()
+            step(physicsClientId=client)
+            physics += timer() - t0
             if s.early_stop and k + 1 >= n_ramp:
-                still = still + 1 if np.abs(dq).max() < s.settle_joint_speed else 0
+                still = still + 1 if np.abs(state[7:]).max() < calm else 0
                 if still >= n_window:
+                    self.stats.add(k + 1, physics)
                     return k + 1, True
+        self.stats.add(n_max, physics)
         return n_max, False
 
     def _result(

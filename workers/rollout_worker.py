@@ -8,6 +8,7 @@ as a `TaskSpec`, which pickles, and builds its worlds in its own process.
 """
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import pinocchio as pin
@@ -34,11 +35,19 @@ class RolloutWorker:
         settings: SimSettings | None = None,
     ) -> None:
         self.model = model
-        self.settings = settings or SimSettings()
         self._panda: dict[bytes, PandaSim] = {}
         self._floating: FloatingSim | None = None
         self.task = self._as_task(task)
+        self.settings = self._task_settings(settings or SimSettings())
         self.rollouts = 0
+
+    def _task_settings(self, settings: SimSettings) -> SimSettings:
+        planner = self.task.spec.planner
+        return replace(
+            settings,
+            timestep_s=planner.sim_timestep_s,
+            contact_distance_m=planner.contact_distance_m,
+        )
 
     @staticmethod
     def _as_task(task: Task | TaskSpec) -> Task:
@@ -50,6 +59,7 @@ class RolloutWorker:
         if _geometry(new.spec) != _geometry(self.task.spec):
             self.close()
         self.task = new
+        self.settings = self._task_settings(self.settings)
 
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
         results = [self._one(r) for r in requests]
@@ -85,4 +95,6 @@ class RolloutWorker:
 
 
 def _geometry(spec: TaskSpec) -> tuple:
-    return (spec.manipuland, spec.environment, spec.friction)
+    """What the worlds are built from: a change rebuilds them."""
+    planner = spec.planner
+    return (spec.manipuland, spec.environment, spec.friction, planner.sim_timestep_s)

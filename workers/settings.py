@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 @dataclass(frozen=True)
 class SimSettings:
-    timestep_s: float = 1 / 240
-    contact_distance_m: float = 0.001  # a pair closer than this is in contact
+    timestep_s: float = 1 / 240  # the worker sets these two from the task's planner
+    contact_distance_m: float = 2e-4  # parameters: a pair closer than this is in contact
     spring_limit: float = 20.0  # norm clip of the 6-D spring wrench [N, N·m]
     ramp_speed_m_s: float = 0.1  # setpoint ramp: translation speed ...
     ramp_speed_rad_s: float = 0.5  # ... and rotation speed; the slower one sets the time
