@@ -22,8 +22,8 @@ import numpy as np
 import pinocchio as pin
 
 from bilba_dist.belief.particles import initial_belief
-from bilba_dist.rollout import Motion, ParticleState, RolloutRequest
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
+from bilba_dist.rollout import Motion, ParticleState, RolloutRequest
 from bilba_dist.task.loader import load_task
 from workers.rollout_worker import RolloutWorker
 from workers.settings import SimSettings
@@ -54,7 +54,7 @@ def measure(model: str, early_stop: bool, n: int, repeats: int) -> dict[str, flo
         t0 = time.perf_counter()
         results = worker.simulate([request] * n)
         wall = time.perf_counter() - t0
-        steps, physics = sim.stats.steps - steps0, sim.stats.physics_s - physics0
+        _steps, physics = sim.stats.steps - steps0, sim.stats.physics_s - physics0
         rates.append(n / wall)
         overheads.append((wall - physics) / physics)
         sims.append(statistics.mean(r.sim_time_s for r in results))
@@ -103,9 +103,9 @@ def main() -> None:
         for early in (False, True)
     }
     ratios = []
-    for _ in range(args.repeats):
-        one = processes(1, args.rollouts)
-        two = processes(2, args.rollouts)
+    for _ in range(args.repeats):  # longer runs: process start-up and the barrier add noise
+        one = processes(1, 5 * args.rollouts)
+        two = processes(2, 5 * args.rollouts)
         ratios.append(two / one)
     print(
         f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
@@ -117,7 +117,7 @@ def main() -> None:
     )
     for (model, early), r in rows.items():
         print(
-            f"{model:<9} {str(early):>10} {r['per_s']:10.1f} {r['sim_time_s']:6.2f} "
+            f"{model:<9} {early!s:>10} {r['per_s']:10.1f} {r['sim_time_s']:6.2f} "
             f"{r['us_per_step']:8.0f} {r['overhead_vs_physics']:12.2f} {int(r['goal_reached']):>5}"
         )
     print(f"two processes / one (Panda, early stop): {statistics.median(ratios):.2f}x")

@@ -150,8 +150,9 @@ class FloatingSim:
             if norm > limit:
                 spring *= limit / norm
             wrench = spring - B @ velocity
-            p.applyExternalForce(body, -1, wrench[3:], p_G, world, physicsClientId=client)
-            p.applyExternalTorque(body, -1, wrench[:3], world, physicsClientId=client)
+            forces = wrench.tolist()  # pybullet reads lists ~2.5× faster than arrays
+            p.applyExternalForce(body, -1, forces[3:], p_G.tolist(), world, physicsClientId=client)
+            p.applyExternalTorque(body, -1, forces[:3], world, physicsClientId=client)
             t0 = timer()
             step(physicsClientId=client)
             physics += timer() - t0

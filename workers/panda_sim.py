@@ -151,7 +151,7 @@ class PandaSim:
             state[:7] = ramp[min(k, n_ramp - 1)] - q
             tau = gains.torque(state, gravity(model, data, q))
             p.setJointMotorControlArray(
-                robot, joints, torque_control, forces=tau, physicsClientId=client
+                robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client
             )
             t0 = timer()
             step(physicsClientId=client)
