@@ -197,3 +197,22 @@ def test_written_yaml_roundtrip_is_the_same_task(peg_yaml, tmp_path):
     path = write_task(tmp_path, peg_yaml)
     assert load_task(str(path)).spec == load_task("peg-in-hole").spec
     assert yaml.safe_load(path.read_text())["name"] == "peg-in-hole"
+
+
+def test_joint_angle_start_gives_the_forward_kinematics(peg_yaml, tmp_path):
+    from bilba_dist.robot.panda import Q_CENTRE, PandaModel
+
+    data = copy.deepcopy(peg_yaml)
+    data["robot_start"] = {"joints": [float(v) for v in Q_CENTRE]}
+    task = load_task(str(write_task(tmp_path, data)))
+    expected = PandaModel().fk(Q_CENTRE)
+    assert task.X_WG0.isApprox(expected, 1e-12)
+    assert not task.X_WG0.isApprox(load_task("peg-in-hole").X_WG0, 1e-3)
+
+
+def test_robot_start_needs_a_pose_or_joints(peg_yaml, tmp_path):
+    data = copy.deepcopy(peg_yaml)
+    data["robot_start"] = {}
+    result = run_cli("graph", str(write_task(tmp_path, data)))
+    assert result.exit_code == 2
+    assert "robot_start: give the start as 'gripper'" in result.stderr
