@@ -102,11 +102,16 @@ class CObsSlice:
         ]
 
     def sample_mode(
-        self, mode: ContactPair, n: int, rng: np.random.Generator, depth: float = 0.0
+        self,
+        mode: ContactPair,
+        n: int,
+        rng: np.random.Generator,
+        depth: float | tuple[float, float] = 0.0,
     ) -> np.ndarray:
         """Up to ``n`` points on the boundary region of ``mode`` (area-weighted over its
         facets, rejecting points covered by another polytope); with ``depth`` > 0 each point
-        is then pushed that far inside, against its facet's normal [m]."""
+        is then pushed that far inside, against its facet's normal [m] (a pair: a depth
+        uniform in that range, per point)."""
         facets = self.mode_facets(mode)
         if not facets:
             return np.zeros((0, 3))
@@ -119,7 +124,8 @@ class CObsSlice:
             pick = rng.choice(len(triangles), size=4 * n, p=areas / areas.sum())
             points = _in_triangles(triangles[pick], rng)
             on = self.in_mode(points, mode)
-            found.append(points[on] - depth * normals[pick][on])
+            d = rng.uniform(*depth, size=(int(on.sum()), 1)) if isinstance(depth, tuple) else depth
+            found.append(points[on] - d * normals[pick][on])
             if sum(len(f) for f in found) >= n:
                 break
         return np.concatenate(found)[:n]

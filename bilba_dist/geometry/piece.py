@@ -172,6 +172,9 @@ class Part:
         if not self.pieces:
             raise GeometryError(f"part {self.name!r} has no pieces")
 
+    def pieces_by_name(self) -> dict[str, ConvexPiece]:
+        return {piece.name: piece for piece in self.pieces}
+
     @property
     def face_names(self) -> list[str]:
         return [f.name for p in self.pieces for f in p.faces]

@@ -32,10 +32,19 @@ class GraphParams:
 class ModeGraph:
     """A directed graph over modes with belief-dependent edge costs; prunable."""
 
-    def __init__(self, cslice: CObsSlice, graph: nx.DiGraph, goal: ContactPair) -> None:
+    def __init__(
+        self, cslice: CObsSlice, graph: nx.DiGraph, goal: ContactPair, delta_proj: float
+    ) -> None:
         self.cslice = cslice
         self.graph = graph
         self.goal = goal
+        self.delta_proj = delta_proj
+
+    def reweight(self, positions: np.ndarray) -> None:
+        """Recompute every edge cost for a belief whose particles are at ``positions``."""
+        u = uncertainty_direction(positions)
+        for _, v, data in self.graph.edges(data=True):
+            data["cost"] = edge_cost(u, self.normal(v), self.delta_proj)
 
     @property
     def modes(self) -> list[ContactPair]:
@@ -93,7 +102,7 @@ def build_mode_graph(
         graph.add_edge(b, a, cost=edge_cost(u, normals[a], params.delta_proj))
     for m in nearest_modes(cslice, modes, positions.mean(axis=0), params.n_free):
         graph.add_edge(FREE, m, cost=edge_cost(u, normals[m], params.delta_proj))
-    return ModeGraph(cslice, graph, goal)
+    return ModeGraph(cslice, graph, goal, params.delta_proj)
 
 
 def edge_cost(u: np.ndarray, normal: np.ndarray, delta_proj: float) -> float:

@@ -1,0 +1,59 @@
+"""A belief in motion: every particle with its current state and contact set, and the
+score ``h(b, F) = #particles in F + λ·IOU(D_bel(b), D̃_bel(b))``.
+
+"In F" is asked of a set ``accept`` of modes: the contact sought and the modes after it in
+the schedule, so a motion that carries a particle past F (into the next contact, or the
+goal) counts as progress rather than failure."""
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from bilba_dist.belief.particles import Particle
+from bilba_dist.geometry.contact import ContactPair, ContactSet
+from bilba_dist.rollout import ParticleState, RolloutResult
+
+#: Weight of the contact-homogeneity term; in (0, 1) so it only breaks ties in the count.
+LAMBDA = 0.5
+
+Accept = frozenset[ContactPair]
+
+
+@dataclass(frozen=True)
+class Belief:
+    particles: tuple[Particle, ...]
+    states: tuple[ParticleState, ...]
+    contacts: tuple[ContactSet, ...]
+
+    def __len__(self) -> int:
+        return len(self.particles)
+
+    def after(self, results: Sequence[RolloutResult]) -> "Belief":
+        """The posterior: each particle's state and contacts after its rollout."""
+        return Belief(
+            self.particles,
+            tuple(r.state for r in results),
+            tuple(r.contacts for r in results),
+        )
+
+    def count(self, accept: Accept) -> int:
+        """Particles whose contact set holds one of the ``accept`` modes."""
+        return sum(bool(c & accept) for c in self.contacts)
+
+    def score(self, accept: Accept) -> float:
+        return self.count(accept) + LAMBDA * contact_iou(self.contacts)
+
+
+def d_bel(contacts: Sequence[ContactSet]) -> ContactSet:
+    """``D_bel``: the contacts every particle has."""
+    return frozenset.intersection(*contacts) if contacts else frozenset()
+
+
+def d_bel_union(contacts: Sequence[ContactSet]) -> ContactSet:
+    """``D̃_bel``: the contacts some particle has."""
+    return frozenset.union(*contacts) if contacts else frozenset()
+
+
+def contact_iou(contacts: Sequence[ContactSet]) -> float:
+    """IOU of D_bel and D̃_bel: 1 when all particles share one contact set (also all free)."""
+    union = d_bel_union(contacts)
+    return 1.0 if not union else len(d_bel(contacts)) / len(union)

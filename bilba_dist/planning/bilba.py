@@ -1,0 +1,187 @@
+"""BILBA's outer loop (paper Algorithm 1): follow the contact schedule from Dijkstra, make
+each contact with MakeContact, replan after each contact reached, prune an edge that failed,
+and start over from the initial belief, up to ``n_attempts`` or the timeout."""
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.start import start_state
+from bilba_dist.belief.state import Belief
+from bilba_dist.errors import NoScheduleError
+from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.modes.graph import ModeGraph
+from bilba_dist.modes.schedule import SliceCache, belief_graph
+from bilba_dist.planning.evaluate import Evaluator
+from bilba_dist.planning.gp import GPParams
+from bilba_dist.planning.make_contact import (
+    ContactSearch,
+    PlanningTimeout,
+    Step,
+    StiffnessRule,
+    make_contact,
+)
+from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.planning.setpoints import SetpointParams
+from bilba_dist.planning.stiffness import fixed_stiffness, variable_stiffness
+from bilba_dist.robot.panda import PandaModel
+from bilba_dist.rollout import RolloutBackend
+from bilba_dist.task.loader import Task
+
+Variant = Literal["bilba-variable", "bilba-fixed"]
+PLANNERS: tuple[Variant, ...] = ("bilba-variable", "bilba-fixed")
+
+
+@dataclass
+class Progress:
+    """What a progress display shows; the planner calls ``update`` as it goes."""
+
+    contact: str = ""
+    best_score: float = 0.0
+    rollouts: int = 0
+    update: Callable[["Progress"], None] = field(default=lambda progress: None)
+
+
+def plan(
+    task: Task,
+    backend: RolloutBackend,
+    variant: Variant = "bilba-variable",
+    seed: int = 0,
+    timeout_s: float | None = None,
+    progress: Progress | None = None,
+) -> PlanResult:
+    """Plan for ``task``'s initial belief. Never raises for "no plan": the result says why."""
+    clock = time.perf_counter
+    started = clock()
+    progress = progress or Progress()
+    rng = np.random.default_rng(seed)
+    params = task.spec.planner
+    particles = initial_belief(task)
+    panda = PandaModel()
+    b0 = Belief(
+        particles,
+        tuple(start_state(task, p, panda) for p in particles),
+        tuple(frozenset() for _ in particles),
+    )
+    result = PlanResult(False, "", [], variant, seed)
+    evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
+    search = ContactSearch(
+        evaluator=evaluator,
+        cache=SliceCache(task),
+        stiffness=_stiffness_rule(task, variant),
+        setpoints=SetpointParams(
+            params.setpoints_per_particle, params.noisy_setpoints, params.setpoint_noise_m
+        ),
+        gp=GPParams(
+            params.gp_test_points,
+            params.gp_noise,
+            params.gp_simulated,
+            params.gp_rounds,
+            params.gp_restarts,
+        ),
+        motion_timeout_s=params.motion_timeout_s,
+        deadline=started + (timeout_s if timeout_s is not None else params.timeout_s),
+        clock=clock,
+        on_progress=lambda contact, best: _show(progress, contact, best),
+    )
+    try:
+        graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
+        _attempts(task, graph, b0, search, rng, result, panda)
+    except NoScheduleError as exc:
+        result.reason = f"no contact schedule: {exc}"
+    except PlanningTimeout:
+        result.reason = f"timeout after {clock() - started:.1f} s"
+    result.planning_time_s = clock() - started
+    result.rollouts = evaluator.rollouts
+    return result
+
+
+def _attempts(
+    task: Task,
+    graph: ModeGraph,
+    b0: Belief,
+    search: ContactSearch,
+    rng: np.random.Generator,
+    result: PlanResult,
+    panda: PandaModel,
+) -> None:
+    for attempt in range(task.spec.planner.n_attempts):
+        result.attempts = attempt + 1
+        belief, mode, steps = b0, FREE, []
+        graph.reweight(_positions(belief))
+        while True:
+            schedule = graph.schedule(mode)
+            result.schedules.append(schedule)
+            target = schedule[1]
+            outcome = make_contact(search, belief, target, frozenset(schedule[1:]), rng)
+            if not outcome.success:
+                graph.prune(mode, target)
+                result.pruned.append((mode, target))
+                result.reason = f"edges pruned until no schedule was left; last: {outcome.reason}"
+                break
+            steps += outcome.steps
+            belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
+            if mode == task.goal:
+                result.success, result.reason = True, ""
+                result.motions = _planned(steps, b0, panda)
+                result.final_belief = belief
+                return
+            graph.reweight(_positions(belief))
+
+
+def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
+    """The furthest schedule mode that every particle has reached or passed."""
+    reached = [
+        max((k for k, m in enumerate(schedule) if m in contacts), default=0)
+        for contacts in belief.contacts
+    ]
+    return schedule[min(reached)]
+
+
+def _positions(belief: Belief) -> np.ndarray:
+    return np.array(
+        [
+            (p.X_WO.inverse() * s.X_WM).translation
+            for p, s in zip(belief.particles, belief.states, strict=True)
+        ]
+    )
+
+
+def _planned(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
+    """Attach the joint setpoint (IK from the nominal particle's start) to each motion."""
+    q = b0.states[0].q
+    planned = []
+    for step in steps:
+        q = panda.ik(step.motion.G_d, q)
+        planned.append(
+            PlannedMotion(
+                step.motion.K, step.motion.G_d, q, step.motion.timeout_s, step.contact, step.score
+            )
+        )
+    return planned
+
+
+def _stiffness_rule(task: Task, variant: Variant) -> StiffnessRule:
+    if variant == "bilba-fixed":
+        return lambda belief, mode, rng: fixed_stiffness()
+
+    def variable(belief: Belief, mode: ContactPair, rng: np.random.Generator) -> np.ndarray:
+        i = int(rng.integers(len(belief)))
+        X_OM = belief.particles[i].X_WO.inverse() * belief.states[i].X_WM
+        return variable_stiffness(task, mode, X_OM)
+
+    return variable
+
+
+def _count(progress: Progress, n: int) -> None:
+    progress.rollouts += n
+    progress.update(progress)
+
+
+def _show(progress: Progress, contact: str, best: float) -> None:
+    progress.contact, progress.best_score = contact, best
+    progress.update(progress)

@@ -1,0 +1,130 @@
+"""MakeContact (paper Algorithm 2, with Algorithm 3's sampling and GP rounds): a short
+sequence of compliant motions that brings every particle into one contact, or failure."""
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from itertools import chain, zip_longest
+
+import numpy as np
+
+from bilba_dist.belief.state import Accept, Belief
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.modes.schedule import SliceCache
+from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
+from bilba_dist.planning.gp import GPParams, features, propose
+from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
+from bilba_dist.rollout import Motion
+
+#: ``stiffness(belief, mode, rng)`` → 6×6 K for the next motion.
+StiffnessRule = Callable[[Belief, ContactPair, np.random.Generator], np.ndarray]
+
+
+class PlanningTimeout(Exception):
+    """The overall planning deadline passed (caught by the outer loop)."""
+
+
+@dataclass
+class ContactSearch:
+    """Everything MakeContact needs; the same object serves every contact of a plan."""
+
+    evaluator: Evaluator
+    cache: SliceCache
+    stiffness: StiffnessRule
+    setpoints: SetpointParams
+    gp: GPParams
+    motion_timeout_s: float
+    deadline: float
+    clock: Callable[[], float]
+    max_motions: int = 4
+    on_progress: Callable[[str, float], None] = field(default=lambda contact, best: None)
+
+
+@dataclass(frozen=True)
+class Step:
+    motion: Motion
+    contact: ContactPair
+    score: float
+
+
+@dataclass(frozen=True)
+class ContactOutcome:
+    success: bool
+    steps: list[Step]
+    belief: Belief
+    reason: str = ""
+
+
+def make_contact(
+    search: ContactSearch,
+    belief: Belief,
+    mode: ContactPair,
+    accept: Accept,
+    rng: np.random.Generator,
+) -> ContactOutcome:
+    """Motions towards ``mode`` until every particle is in one of the ``accept`` modes (``mode``
+    and those after it in the schedule); fail when a motion no longer adds a particle."""
+    steps: list[Step] = []
+    for _ in range(search.max_motions):
+        before = belief.count(accept)
+        best = best_motion(search, belief, mode, accept, rng)
+        if best is None or best.posterior is None or best.count <= before:
+            reason = f"no motion brought more particles into {mode} ({before}/{len(belief)})"
+            return ContactOutcome(False, steps, belief, reason)
+        steps.append(Step(best.candidate.motion, mode, best.score))
+        belief = best.posterior
+        if best.count == len(belief):
+            return ContactOutcome(True, steps, belief)
+    return ContactOutcome(
+        False, steps, belief, f"{search.max_motions} motions did not reach {mode}"
+    )
+
+
+def best_motion(
+    search: ContactSearch,
+    belief: Belief,
+    mode: ContactPair,
+    accept: Accept,
+    rng: np.random.Generator,
+) -> Scored | None:
+    """Sampled setpoints first (screened per particle); then GP rounds if none works for all."""
+    K = search.stiffness(belief, mode, rng)
+    per_particle = [
+        [
+            Candidate(Motion(K, G_d, search.motion_timeout_s), i)
+            for G_d in sample_setpoints(
+                belief.particles[i],
+                belief.states[i].X_WM,
+                mode,
+                search.cache,
+                search.setpoints,
+                rng,
+            )
+        ]
+        for i in range(len(belief))
+    ]
+    candidates = [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
+    _check(search)
+    scored, winner = search.evaluator.score(belief, candidates, accept)
+    best = winner or best_of(scored)
+    _report(search, mode, best)
+    for _ in range(search.gp.rounds if winner is None and scored else 0):
+        _check(search)
+        train = features([s.candidate.motion.G_d for s in scored])
+        proposals, _ = propose(train, np.array([s.score for s in scored]), search.gp, rng)
+        batch = [Candidate(Motion(K, G_d, search.motion_timeout_s), None) for G_d in proposals]
+        more, winner = search.evaluator.score(belief, batch, accept)
+        scored += more
+        best = winner or best_of(scored)
+        _report(search, mode, best)
+        if winner is not None:
+            break
+    return best
+
+
+def _check(search: ContactSearch) -> None:
+    if search.clock() > search.deadline:
+        raise PlanningTimeout
+
+
+def _report(search: ContactSearch, mode: ContactPair, best: Scored | None) -> None:
+    search.on_progress(str(mode), best.score if best is not None else 0.0)

@@ -1,0 +1,38 @@
+"""What a planner returns: always a result that says whether it worked and why not."""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.belief.state import Belief
+from bilba_dist.geometry.contact import ContactPair
+
+
+@dataclass(frozen=True)
+class PlannedMotion:
+    """One motion of a plan: stiffness ``K`` (6×6, rotation first, world axes), gripper
+    setpoint ``G_d`` (``X_WG``), joint setpoint ``q_d`` (IK of G_d), the contact it is meant to
+    reach and the belief score it reached in simulation."""
+
+    K: np.ndarray
+    G_d: pin.SE3
+    q_d: np.ndarray
+    timeout_s: float
+    contact: ContactPair
+    score: float
+
+
+@dataclass
+class PlanResult:
+    success: bool
+    reason: str  # "" on success; else why: no schedule, edges pruned, timeout, ...
+    motions: list[PlannedMotion]
+    planner: str
+    seed: int
+    planning_time_s: float = 0.0
+    rollouts: int = 0
+    attempts: int = 0
+    schedules: list[list[ContactPair]] = field(default_factory=list)
+    pruned: list[tuple[ContactPair, ContactPair]] = field(default_factory=list)
+    final_belief: Belief | None = None
