@@ -9,17 +9,14 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from bilba_dist.cli.main import cli, main  # noqa: F401  (main registers the sub-commands)
+from bilba_dist.cli.main import cli, register
 from bilba_dist.errors import TaskError
 from bilba_dist.task.loader import builtin_tasks, load_task
 from tests.conftest import write_task
 
 
 def run_cli(*args: str):
-    from bilba_dist.cli import graph, tasks
-
-    cli.add_command(tasks.tasks)
-    cli.add_command(graph.graph)
+    register()
     return CliRunner().invoke(cli, list(args))
 
 

@@ -37,8 +37,13 @@ def cli() -> None:
 
 
 def main() -> None:
-    from bilba_dist.cli import graph, tasks
-
-    cli.add_command(tasks.tasks)
-    cli.add_command(graph.graph)
+    register()
     cli(prog_name="bilba")
+
+
+def register() -> None:
+    """Attach the sub-commands (imported here so `bilba --help` stays quick)."""
+    from bilba_dist.cli import graph, plan, tasks, validate
+
+    for command in (tasks.tasks, graph.graph, plan.plan_command, validate.validate):
+        cli.add_command(command)

@@ -20,7 +20,7 @@ from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.gp import GPParams
 from bilba_dist.planning.make_contact import (
     ContactSearch,
-    PlanningTimeout,
+    PlanningTimeoutError,
     Step,
     StiffnessRule,
     make_contact,
@@ -93,7 +93,7 @@ def plan(
         _attempts(task, graph, b0, search, rng, result, panda)
     except NoScheduleError as exc:
         result.reason = f"no contact schedule: {exc}"
-    except PlanningTimeout:
+    except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
     result.planning_time_s = clock() - started
     result.rollouts = evaluator.rollouts

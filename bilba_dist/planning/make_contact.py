@@ -19,7 +19,7 @@ from bilba_dist.rollout import Motion
 StiffnessRule = Callable[[Belief, ContactPair, np.random.Generator], np.ndarray]
 
 
-class PlanningTimeout(Exception):
+class PlanningTimeoutError(Exception):
     """The overall planning deadline passed (caught by the outer loop)."""
 
 
@@ -123,7 +123,7 @@ def best_motion(
 
 def _check(search: ContactSearch) -> None:
     if search.clock() > search.deadline:
-        raise PlanningTimeout
+        raise PlanningTimeoutError
 
 
 def _report(search: ContactSearch, mode: ContactPair, best: Scored | None) -> None:

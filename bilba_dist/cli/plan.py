@@ -1,0 +1,90 @@
+"""`bilba plan TASK`: find a plan with BILBA, write the plan file, print a summary."""
+
+import sys
+from pathlib import Path
+
+import click
+
+from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
+from bilba_dist.plan.file import plan_document, write_plan
+from bilba_dist.planning.bilba import PLANNERS, Progress, plan
+from bilba_dist.planning.result import PlanResult
+from bilba_dist.task.loader import Task, load_task
+
+EXIT_NO_PLAN = 1
+
+
+@click.command("plan")
+@task_argument
+@click.option("--planner", type=click.Choice(PLANNERS), default="bilba-variable", show_default=True)
+@uncertainty_option
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Plan file to write [default: plans/TASK-PLANNER-sSEED.json].",
+)
+@click.option("--timeout", type=float, help="Overall planning timeout [s] (task default: 900).")
+@click.option(
+    "--workers",
+    type=int,
+    default=2,
+    show_default=True,
+    help="Ray rollout actors; 0 runs in-process.",
+)
+@click.option(
+    "--address", help="Join this Ray cluster (auto or HOST:PORT) instead of starting one."
+)
+@user_errors
+def plan_command(
+    task: str,
+    planner: str,
+    uncertainty: tuple[str, ...],
+    seed: int,
+    out: Path | None,
+    timeout: float | None,
+    workers: int,
+    address: str | None,
+) -> None:
+    """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
+    from tqdm import tqdm
+
+    from schedulers.session import rollout_backend
+
+    loaded = load_task(task, split_uncertainty(uncertainty))
+    out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
+    with (
+        rollout_backend(loaded, workers, address) as backend,
+        tqdm(unit=" rollouts", file=sys.stderr, dynamic_ncols=True) as bar,
+    ):
+
+        def show(progress: Progress) -> None:
+            bar.set_description_str(progress.contact or "schedule", refresh=False)
+            bar.set_postfix_str(f"best score {progress.best_score:.2f}", refresh=False)
+            bar.update(progress.rollouts - bar.n)
+
+        result = plan(loaded, backend, planner, seed, timeout, Progress(update=show))  # type: ignore[arg-type]
+    write_plan(plan_document(result, loaded), out)
+    summary(result, loaded, out)
+    if not result.success:
+        sys.exit(EXIT_NO_PLAN)
+
+
+def summary(result: PlanResult, task: Task, out: Path) -> None:
+    bounds = ", ".join(f"{k}={v:g}" for k, v in task.spec.uncertainty.items()) or "none"
+    click.echo(f"task       {task.name} ({task.hash[:12]}), uncertainty {bounds}")
+    click.echo(f"planner    {result.planner}, seed {result.seed}")
+    status = "plan found" if result.success else f"NO PLAN: {result.reason}"
+    click.echo(f"outcome    {status}")
+    click.echo(
+        f"effort     {result.planning_time_s:.1f} s, {result.rollouts} rollouts, "
+        f"{len(result.schedules)} schedules, {len(result.pruned)} edges pruned"
+    )
+    for k, m in enumerate(result.motions, 1):
+        xyz = " ".join(f"{v:+.4f}" for v in m.G_d.translation)
+        click.echo(f"motion {k:<3} to {m.contact}  G_d [{xyz}] m  score {m.score:.2f}")
+    if result.final_belief is not None:
+        for i, contacts in enumerate(result.final_belief.contacts):
+            click.echo(f"particle {i}: {', '.join(sorted(map(str, contacts))) or 'free'}")
+    click.echo(f"plan file  {out}")

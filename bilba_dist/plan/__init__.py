@@ -1,0 +1,1 @@
+"""Plan files: the JSON a planner writes and a Panda controller (or `bilba validate`) reads."""

@@ -1,0 +1,117 @@
+"""The plan file: versioned JSON holding everything needed to run the motions on a Panda
+without the planner — per motion K (6×6, rotation first, world axes), G_d (xyz and quaternion
+xyzw, world frame), q_d (7 joints), timeout, the contact it should reach, and its score —
+plus the task (name, hash, uncertainty), planner, seed, parameters and planning time."""
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist import __version__
+from bilba_dist.errors import BilbaError
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.task.loader import Task
+
+FORMAT = "bilba-plan"
+VERSION = 1
+
+
+def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
+    return {
+        "format": FORMAT,
+        "version": VERSION,
+        "task": {
+            "name": task.name,
+            "hash": task.hash,
+            "source": task.source,
+            "uncertainty": task.spec.uncertainty,
+        },
+        "planner": result.planner,
+        "planner_version": __version__,
+        "seed": result.seed,
+        "parameters": task.spec.planner.model_dump(),
+        "success": result.success,
+        "reason": result.reason,
+        "planning_time_s": round(result.planning_time_s, 3),
+        "rollouts": result.rollouts,
+        "motions": [_motion(m) for m in result.motions],
+    }
+
+
+def _motion(m: PlannedMotion) -> dict[str, Any]:
+    quat = pin.Quaternion(m.G_d.rotation).coeffs()  # x, y, z, w
+    return {
+        "K": np.asarray(m.K).tolist(),
+        "G_d": {"xyz": m.G_d.translation.tolist(), "quat_xyzw": quat.tolist()},
+        "q_d": np.asarray(m.q_d).tolist(),
+        "timeout_s": m.timeout_s,
+        "contact": {"env": m.contact.env, "manip": m.contact.manip},
+        "score": m.score,
+    }
+
+
+def dumps(document: dict[str, Any]) -> str:
+    """Canonical text of a plan document (the MCAP log stores the same bytes)."""
+    return json.dumps(document, indent=2, sort_keys=True) + "\n"
+
+
+def write_plan(document: dict[str, Any], path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(dumps(document), encoding="utf-8")
+    except OSError as exc:
+        raise BilbaError(f"{path}: cannot write plan file: {exc.strerror or exc}") from None
+
+
+@dataclass(frozen=True)
+class PlanFile:
+    document: dict[str, Any]
+    motions: list[PlannedMotion]
+
+    @property
+    def task_name(self) -> str:
+        return str(self.document["task"]["name"])
+
+    @property
+    def uncertainty(self) -> dict[str, float]:
+        return dict(self.document["task"].get("uncertainty", {}))
+
+
+def read_plan(path: Path) -> PlanFile:
+    """Read and check a plan file; any problem is one BilbaError line naming the file."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise BilbaError(f"{path}: cannot read plan file: {exc.strerror or exc}") from None
+    except json.JSONDecodeError as exc:
+        raise BilbaError(f"{path}: not a plan file (invalid JSON at line {exc.lineno})") from None
+    if not isinstance(document, dict) or document.get("format") != FORMAT:
+        raise BilbaError(f'{path}: not a plan file (no "format": "{FORMAT}")')
+    if document.get("version") != VERSION:
+        raise BilbaError(
+            f"{path}: plan file version {document.get('version')}; this reads {VERSION}"
+        )
+    try:
+        motions = [_read_motion(m) for m in document["motions"]]
+        document["task"]["name"]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise BilbaError(f"{path}: malformed plan file: {type(exc).__name__} {exc}") from None
+    return PlanFile(document, motions)
+
+
+def _read_motion(m: dict[str, Any]) -> PlannedMotion:
+    K = np.array(m["K"], dtype=float)
+    if K.shape != (6, 6):
+        raise ValueError(f"K must be 6x6, got {K.shape}")
+    quat = pin.Quaternion(np.array(m["G_d"]["quat_xyzw"], dtype=float))  # x, y, z, w
+    quat.normalize()
+    G_d = pin.SE3(quat.matrix(), np.array(m["G_d"]["xyz"], dtype=float))
+    contact = ContactPair(str(m["contact"]["env"]), str(m["contact"]["manip"]))
+    return PlannedMotion(
+        K, G_d, np.array(m["q_d"], dtype=float), float(m["timeout_s"]), contact, float(m["score"])
+    )

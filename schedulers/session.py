@@ -1,0 +1,60 @@
+"""Where rollouts run: in-process, on a local Ray instance the command starts and stops
+(the default: two CPUs, no dashboard), or on an existing Ray cluster (``--address``)."""
+
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
+
+from bilba_dist.errors import BilbaError
+from bilba_dist.rollout import DynamicsModel, RolloutBackend
+from bilba_dist.task.loader import Task
+from workers.rollout_worker import RolloutWorker
+
+
+@contextmanager
+def ray_session(workers: int, address: str | None) -> Iterator[None]:
+    """Start a local Ray instance with ``workers`` CPUs, or join the cluster at ``address``."""
+    import ray
+
+    try:
+        ray.init(
+            address=address,
+            num_cpus=None if address else workers,
+            include_dashboard=False,
+            log_to_driver=False,
+            logging_level=logging.ERROR,
+            configure_logging=True,
+        )
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        where = f"the Ray cluster at {address}" if address else "a local Ray instance"
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise BilbaError(f"cannot start or reach {where}: {first}") from None
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+@contextmanager
+def rollout_backend(
+    task: Task,
+    workers: int = 2,
+    address: str | None = None,
+    model: DynamicsModel = "panda",
+) -> Iterator[RolloutBackend]:
+    """``workers`` = 0 runs in-process; otherwise a pool of that many Ray actors."""
+    if workers == 0:
+        worker = RolloutWorker(task, model)
+        try:
+            yield worker
+        finally:
+            worker.close()
+        return
+    from workers.pool import RayPool
+
+    with ray_session(workers, address):
+        pool = RayPool(task, workers, model)
+        try:
+            yield pool
+        finally:
+            pool.close()

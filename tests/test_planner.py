@@ -1,0 +1,156 @@
+"""The BILBA planner end to end (real PyBullet rollouts, in-process), plan files, replay."""
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from click.testing import CliRunner
+
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.start import start_state
+from bilba_dist.belief.state import LAMBDA, Belief, contact_iou, d_bel, d_bel_union
+from bilba_dist.cli.main import cli, register
+from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.plan.file import plan_document, read_plan, write_plan
+from bilba_dist.plan.replay import replay
+from bilba_dist.planning.bilba import furthest_common, plan
+from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
+from bilba_dist.task.loader import load_task
+from workers.rollout_worker import RolloutWorker
+
+A, B, C = (ContactPair(f"e/{k}", "m/-z") for k in "abc")
+
+
+def belief_with(contacts):
+    return Belief((None,) * len(contacts), (None,) * len(contacts), tuple(map(frozenset, contacts)))  # type: ignore[arg-type]
+
+
+def test_score_counts_particles_and_adds_contact_iou():
+    b = belief_with([{A, B}, {A}, {C}])
+    assert d_bel(b.contacts) == frozenset() and d_bel_union(b.contacts) == {A, B, C}
+    assert b.count(frozenset({A})) == 2
+    assert b.score(frozenset({A})) == pytest.approx(2 + LAMBDA * 0.0)
+    same = belief_with([{A, B}, {A, B}])
+    assert contact_iou(same.contacts) == 1.0
+    assert same.score(frozenset({B})) == pytest.approx(2 + LAMBDA)
+    assert b.count(frozenset({B, C})) == 2  # a later schedule mode counts as reached
+
+
+def test_furthest_common_mode_of_a_belief():
+    schedule = [FREE, A, B, C]
+    assert furthest_common(schedule, belief_with([{B}, {C}, {A, B}])) == B
+    assert furthest_common(schedule, belief_with([{C}, {C}])) == C
+    assert furthest_common(schedule, belief_with([{C}, set()])) == FREE
+
+
+def test_variable_stiffness_is_soft_along_the_contact_normal(peg):
+    X_OM = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.16]))
+    K = variable_stiffness(peg, ContactPair("wall_px/inner", "peg/+x"), X_OM)
+    normal = np.array([-1.0, 0.0, 0.0])
+    assert np.allclose(K[3:, 3:] @ normal, 400 * normal)
+    assert np.allclose(K[3:, 3:] @ [0, 0, 1], [0, 0, 600])
+    assert np.allclose(K, K.T) and np.allclose(K[:3, 3:], 0)
+    assert np.linalg.eigvalsh(K[:3, :3]).min() == pytest.approx(60)  # soft about the rotation normal
+
+
+@pytest.fixture(scope="module")
+def pitch_plan():
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
+    worker = RolloutWorker(task, "panda")
+    result = plan(task, worker, "bilba-variable", seed=3)
+    yield task, worker, result
+    worker.close()
+
+
+def test_seeded_plan_brings_every_particle_to_the_hole_bottom(pitch_plan):
+    task, _, result = pitch_plan
+    assert result.success, result.reason
+    assert result.final_belief is not None
+    assert all(task.goal in c for c in result.final_belief.contacts)
+    assert result.motions[-1].contact == task.goal
+    assert result.rollouts > 0
+
+
+def test_plan_file_replays_to_the_same_contacts(pitch_plan, tmp_path):
+    task, worker, result = pitch_plan
+    path = tmp_path / "plan.json"
+    write_plan(plan_document(result, task), path)
+    loaded = read_plan(path)
+    document = json.loads(path.read_text())
+    assert document["task"]["hash"] == task.hash and document["success"] is True
+    for written, read in zip(result.motions, loaded.motions, strict=True):
+        assert np.array_equal(written.K, read.K)
+        assert np.allclose(written.G_d.homogeneous, read.G_d.homogeneous, atol=1e-12)
+        assert read.contact == written.contact
+    final = replay(task, loaded.motions, initial_belief(task), worker)
+    assert final.contacts == result.final_belief.contacts
+
+
+def test_plan_motion_setpoints_are_reachable_joint_targets(pitch_plan):
+    from bilba_dist.robot.panda import PandaModel
+
+    _, _, result = pitch_plan
+    model = PandaModel()
+    for motion in result.motions:
+        assert model.fk(motion.q_d).isApprox(motion.G_d, 1e-4)
+
+
+def test_failed_search_says_why(peg):
+    worker = RolloutWorker(peg, "panda")
+    timeout = plan(peg, worker, "bilba-fixed", seed=0, timeout_s=0.0)
+    assert not timeout.success and timeout.reason.startswith("timeout")
+    assert timeout.motions == []
+    spec = peg.spec.model_copy(update={"goal": peg.spec.goal.model_copy(update={"env": "floor/-z"})})
+    from bilba_dist.task.loader import build_task
+
+    impossible = plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0)
+    assert not impossible.success and "no contact schedule" in impossible.reason
+    worker.close()
+
+
+def test_start_state_puts_the_gripper_at_the_start_pose(peg):
+    from bilba_dist.robot.panda import PandaModel
+
+    particle = initial_belief(peg)[1]
+    state = start_state(peg, particle)
+    assert PandaModel().fk(state.q).isApprox(peg.X_WG0, 1e-4)
+    assert state.X_WM.isApprox(peg.X_WG0 * particle.X_GM, 1e-12)
+
+
+def test_plan_command_without_a_plan_exits_1_and_keeps_the_result(tmp_path):
+    register()
+    out = tmp_path / "p.json"
+    result = CliRunner().invoke(
+        cli, ["plan", "peg-in-hole", "--workers", "0", "--timeout", "0", "--out", str(out)]
+    )
+    assert result.exit_code == 1, result.output
+    assert "NO PLAN: timeout" in result.output
+    assert json.loads(out.read_text())["success"] is False
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (None, "cannot read plan file"),
+        ("{not json", "invalid JSON at line 1"),
+        ('{"format": "other"}', "not a plan file"),
+        ('{"format": "bilba-plan", "version": 1, "task": {"name": "x"}}', "malformed plan file"),
+    ],
+)
+def test_validate_rejects_bad_plan_files(content, message, tmp_path):
+    register()
+    path = tmp_path / "plan.json"
+    if content is not None:
+        path.write_text(content)
+    result = CliRunner().invoke(cli, ["validate", str(path), "--workers", "0"])
+    assert result.exit_code == 2
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_fixed_variant_uses_very_stiff_gains(pitch_plan):
+    task, worker, _ = pitch_plan
+    result = plan(task, worker, "bilba-fixed", seed=1, timeout_s=120)
+    assert result.success, result.reason
+    assert all(np.array_equal(m.K, VERY_STIFF) for m in result.motions)
