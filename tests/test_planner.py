@@ -15,7 +15,6 @@ from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.plan.file import plan_document, read_plan, write_plan
 from bilba_dist.plan.replay import replay
 from bilba_dist.planning.bilba import furthest_common, plan
-from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
 from bilba_dist.task.loader import load_task
 from workers.rollout_worker import RolloutWorker
@@ -52,7 +51,9 @@ def test_variable_stiffness_is_soft_along_the_contact_normal(peg):
     assert np.allclose(K[3:, 3:] @ normal, 400 * normal)
     assert np.allclose(K[3:, 3:] @ [0, 0, 1], [0, 0, 600])
     assert np.allclose(K, K.T) and np.allclose(K[:3, 3:], 0)
-    assert np.linalg.eigvalsh(K[:3, :3]).min() == pytest.approx(60)  # soft about the rotation normal
+    assert np.linalg.eigvalsh(K[:3, :3]).min() == pytest.approx(
+        60
+    )  # soft about the rotation normal
 
 
 @pytest.fixture(scope="module")
@@ -102,7 +103,9 @@ def test_failed_search_says_why(peg):
     timeout = plan(peg, worker, "bilba-fixed", seed=0, timeout_s=0.0)
     assert not timeout.success and timeout.reason.startswith("timeout")
     assert timeout.motions == []
-    spec = peg.spec.model_copy(update={"goal": peg.spec.goal.model_copy(update={"env": "floor/-z"})})
+    spec = peg.spec.model_copy(
+        update={"goal": peg.spec.goal.model_copy(update={"env": "floor/-z"})}
+    )
     from bilba_dist.task.loader import build_task
 
     impossible = plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0)

@@ -1,7 +1,9 @@
 """Rollout backends: in-process (one RolloutWorker) and a pool of Ray actors.
 
-`RayPool` splits a batch into contiguous slices, one per actor, and concatenates the
-results in request order, so a seeded plan is the same on 1 worker or on N."""
+`RayPool` hands a batch out in small groups to whichever actor is free (rollouts differ in
+length: early stop ends some at 0.5 s, others run 5 s, so fixed halves leave one actor
+idle), and returns the results in request order, so a seeded plan is the same on 1 worker
+or on N."""
 
 from collections.abc import Sequence
 
@@ -15,22 +17,20 @@ class RayPool:
 
     def __init__(self, task: Task, workers: int, model: DynamicsModel = "panda") -> None:
         import ray
+        from ray.util import ActorPool
 
         self._ray = ray
         actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(RolloutWorker)
         self.actors = [actor.remote(task.spec, model) for _ in range(workers)]
+        self._pool = ActorPool(self.actors)
 
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
         if not requests:
             return []
-        n = len(self.actors)
-        size = -(-len(requests) // n)
-        parts = [list(requests[i : i + size]) for i in range(0, len(requests), size)]
-        futures = [
-            a.simulate.remote(part)  # type: ignore[attr-defined]
-            for a, part in zip(self.actors, parts, strict=False)
-        ]
-        return [r for part in self._ray.get(futures) for r in part]
+        size = max(1, len(requests) // (4 * len(self.actors)))  # ~4 groups per actor
+        groups = [list(requests[i : i + size]) for i in range(0, len(requests), size)]
+        done = self._pool.map(lambda actor, group: actor.simulate.remote(group), groups)
+        return [r for group in done for r in group]
 
     def close(self) -> None:
         for actor in self.actors:

@@ -3,10 +3,9 @@
 from collections.abc import Sequence
 
 from bilba_dist.belief.particles import Particle
-from bilba_dist.belief.start import start_state
+from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion
-from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest
 from bilba_dist.task.loader import Task
 
@@ -18,12 +17,7 @@ def replay(
     backend: RolloutBackend,
 ) -> Belief:
     """The belief after the plan, from every particle's start state (one batch per motion)."""
-    panda = PandaModel()
-    belief = Belief(
-        tuple(particles),
-        tuple(start_state(task, p, panda) for p in particles),
-        tuple(frozenset() for _ in particles),
-    )
+    belief = start_belief(task, particles)
     for planned in motions:
         motion = Motion(planned.K, planned.G_d, planned.timeout_s)
         requests = [

@@ -10,7 +10,7 @@ from typing import Literal
 import numpy as np
 
 from bilba_dist.belief.particles import initial_belief
-from bilba_dist.belief.start import start_state
+from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import NoScheduleError
 from bilba_dist.geometry.contact import FREE, ContactPair
@@ -62,11 +62,7 @@ def plan(
     params = task.spec.planner
     particles = initial_belief(task)
     panda = PandaModel()
-    b0 = Belief(
-        particles,
-        tuple(start_state(task, p, panda) for p in particles),
-        tuple(frozenset() for _ in particles),
-    )
+    b0 = start_belief(task, particles)
     result = PlanResult(False, "", [], variant, seed)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
     search = ContactSearch(

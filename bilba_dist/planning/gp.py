@@ -20,6 +20,8 @@ class GPParams:
     simulated: int = 31  # best predicted test points simulated per round
     rounds: int = 3
     restarts: int = 9
+    max_train: int = 128  # fit on the best-scored this many: a fit is O(n³) per optimiser
+    # step, and 300+ points made GP fitting 10 % of a peg plan (profiled)
 
 
 def features(setpoints: list[pin.SE3]) -> np.ndarray:
@@ -31,6 +33,9 @@ def propose(
 ) -> tuple[list[pin.SE3], np.ndarray]:
     """The ``simulated`` test setpoints with the best predicted score, and the predictions.
     Test points are training points plus uniform noise in the log space."""
+    if len(train) > params.max_train:
+        keep = np.sort(np.argsort(-scores, kind="stable")[: params.max_train])
+        train, scores = train[keep], scores[keep]
     base = train[rng.integers(len(train), size=params.test_points)]
     test = base + rng.uniform(-params.noise, params.noise, size=base.shape)
     spread = scores.std()

@@ -1,0 +1,94 @@
+"""Planning time, success and rollouts for the paper's settings, both BILBA variants.
+
+    .venv/bin/python benchmarks/planning.py [--seeds 5] [--workers 2] [--timeout 300]
+        [--settings peg-pitch peg-x peg-y puzzle-x] [--planners bilba-variable bilba-fixed]
+
+Each plan runs on a pool of Ray rollout actors (local, --workers CPUs) started once per
+setting; the time quoted is the planner's own (Ray and actor start-up excluded). Prints a
+table of median ± MAD per cell and ends with one JSON line (times in keys ending `_s`).
+Targets (issue 4, this 2-core machine): peg-in-hole median ≤ 10 s, puzzle ≤ 60 s, all
+successful.
+"""
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+
+from bilba_dist.planning.bilba import PLANNERS, plan
+from bilba_dist.task.loader import load_task
+from schedulers.session import ray_session
+from workers.pool import RayPool
+
+SETTINGS = {
+    "peg-pitch": ("peg-in-hole", "grasp.pitch=2deg"),
+    "peg-x": ("peg-in-hole", "grasp.x=1cm"),
+    "peg-y": ("peg-in-hole", "env.y=1cm"),
+    "puzzle-x": ("puzzle", "grasp.x=1cm"),
+}
+
+
+def mad(values: list[float]) -> float:
+    centre = statistics.median(values)
+    return statistics.median(abs(v - centre) for v in values)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--timeout", type=float, default=300.0)
+    parser.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
+    parser.add_argument("--planners", nargs="+", default=list(PLANNERS), choices=list(PLANNERS))
+    args = parser.parse_args()
+    rows = {}
+    with ray_session(args.workers, None):
+        for setting in args.settings:
+            name, bound = SETTINGS[setting]
+            task = load_task(name, [bound])
+            pool = RayPool(task, args.workers)
+            for planner in args.planners:
+                runs = []
+                for seed in range(args.seeds):
+                    r = plan(task, pool, planner, seed, args.timeout)  # type: ignore[arg-type]
+                    runs.append(r)
+                    print(
+                        f"  {setting} {planner} seed {seed}: {r.success} "
+                        f"{r.planning_time_s:.1f} s {r.rollouts} rollouts {r.reason}",
+                        file=sys.stderr,
+                        flush=True,
+                    )
+                times = [r.planning_time_s for r in runs]
+                rows[setting, planner] = {
+                    "median_s": statistics.median(times),
+                    "mad_s": mad(times),
+                    "success": sum(r.success for r in runs),
+                    "runs": len(runs),
+                    "median_rollouts": statistics.median(r.rollouts for r in runs),
+                }
+            pool.close()
+    print(
+        f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
+        f"{args.workers} Ray workers; {args.seeds} seeds; timeout {args.timeout:g} s"
+    )
+    print(
+        f"{'setting':<10} {'planner':<15} {'median s':>9} {'MAD s':>7} {'success':>8} "
+        f"{'rollouts':>9}"
+    )
+    for (setting, planner), r in rows.items():
+        print(
+            f"{setting:<10} {planner:<15} {r['median_s']:9.1f} {r['mad_s']:7.1f} "
+            f"{r['success']:>4}/{r['runs']:<3} {r['median_rollouts']:9.0f}"
+        )
+    figures = {
+        f"{setting.replace('-', '_')}_{planner.replace('-', '_')}_{key}": value
+        for (setting, planner), r in rows.items()
+        for key, value in r.items()
+    }
+    print(json.dumps(figures, sort_keys=True))
+
+
+if __name__ == "__main__":
+    main()
