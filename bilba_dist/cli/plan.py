@@ -1,15 +1,18 @@
 """`bilba plan TASK`: find a plan with BILBA, write the plan file, print a summary."""
 
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import click
 
 from bilba_dist.cli.main import user_errors
 from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
-from bilba_dist.plan.file import plan_document, write_plan
+from bilba_dist.plan.file import dumps, plan_document, write_plan
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
+from bilba_dist.record.writer import LogWriter
 from bilba_dist.task.loader import Task, load_task
 
 EXIT_NO_PLAN = 1
@@ -36,6 +39,13 @@ EXIT_NO_PLAN = 1
 @click.option(
     "--address", help="Join this Ray cluster (auto or HOST:PORT) instead of starting one."
 )
+@click.option(
+    "--log",
+    "log_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="MCAP log [default: logs/TASK-PLANNER-sSEED-TIME.mcap].",
+)
+@click.option("--no-log", is_flag=True, help="Write no log.")
 @user_errors
 def plan_command(
     task: str,
@@ -46,6 +56,8 @@ def plan_command(
     timeout: float | None,
     workers: int,
     address: str | None,
+    log_path: Path | None,
+    no_log: bool,
 ) -> None:
     """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
     from tqdm import tqdm
@@ -54,6 +66,9 @@ def plan_command(
 
     loaded = load_task(task, split_uncertainty(uncertainty))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
+    log = None if no_log else LogWriter(log_path, loaded, planner, seed)
     with (
         rollout_backend(loaded, workers, address) as backend,
         tqdm(unit=" rollouts", file=sys.stderr, dynamic_ncols=True) as bar,
@@ -64,9 +79,14 @@ def plan_command(
             bar.set_postfix_str(f"best score {progress.best_score:.2f}", refresh=False)
             bar.update(progress.rollouts - bar.n)
 
-        result = plan(loaded, backend, planner, seed, timeout, Progress(update=show))  # type: ignore[arg-type]
-    write_plan(plan_document(result, loaded), out)
+        result = plan(loaded, backend, planner, seed, timeout, Progress(update=show), log)  # type: ignore[arg-type]
+    document = plan_document(result, loaded)
+    write_plan(document, out)
+    if log is not None:
+        log.finish(dumps(document), outcome(result))
     summary(result, loaded, out)
+    if log is not None:
+        click.echo(f"log        {log.path} ({log.transitions} transitions)")
     if not result.success:
         sys.exit(EXIT_NO_PLAN)
 
@@ -88,3 +108,12 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
         for i, contacts in enumerate(result.final_belief.contacts):
             click.echo(f"particle {i}: {', '.join(sorted(map(str, contacts))) or 'free'}")
     click.echo(f"plan file  {out}")
+
+
+def outcome(result: PlanResult) -> dict[str, Any]:
+    return {
+        "success": result.success,
+        "reason": result.reason,
+        "planning_time_s": result.planning_time_s,
+        "rollouts": result.rollouts,
+    }

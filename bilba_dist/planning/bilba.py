@@ -25,6 +25,7 @@ from bilba_dist.planning.make_contact import (
     StiffnessRule,
     make_contact,
 )
+from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import fixed_stiffness, variable_stiffness
@@ -53,6 +54,7 @@ def plan(
     seed: int = 0,
     timeout_s: float | None = None,
     progress: Progress | None = None,
+    recorder: Recorder | None = None,
 ) -> PlanResult:
     """Plan for ``task``'s initial belief. Never raises for "no plan": the result says why."""
     clock = time.perf_counter
@@ -83,6 +85,7 @@ def plan(
         deadline=started + (timeout_s if timeout_s is not None else params.timeout_s),
         clock=clock,
         on_progress=lambda contact, best: _show(progress, contact, best),
+        recorder=recorder or NullRecorder(),
     )
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
@@ -112,11 +115,13 @@ def _attempts(
         while True:
             schedule = graph.schedule(mode)
             result.schedules.append(schedule)
+            search.recorder.schedule(attempt, schedule)
             target = schedule[1]
             outcome = make_contact(search, belief, target, frozenset(schedule[1:]), rng)
             if not outcome.success:
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))
+                search.recorder.pruned((mode, target), outcome.reason)
                 result.reason = f"edges pruned until no schedule was left; last: {outcome.reason}"
                 break
             steps += outcome.steps

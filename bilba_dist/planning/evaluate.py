@@ -47,13 +47,20 @@ class Evaluator:
         return results
 
     def score(
-        self, belief: Belief, candidates: Sequence[Candidate], accept: Accept
+        self,
+        belief: Belief,
+        candidates: Sequence[Candidate],
+        accept: Accept,
+        on_scored: Callable[[Scored], None] = lambda scored: None,
     ) -> tuple[list[Scored], Scored | None]:
         """Score every candidate (screened); stop at the first that gets all into ``accept``."""
         scored: list[Scored] = []
         for start in range(0, len(candidates), self.chunk):
             batch = candidates[start : start + self.chunk]
             chunk_scored = self._score_chunk(belief, batch, accept)
+            for s in chunk_scored:
+                if s.posterior is not None:
+                    on_scored(s)
             scored += chunk_scored
             winners = [s for s in chunk_scored if s.count == len(belief)]
             if winners:

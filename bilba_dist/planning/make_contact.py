@@ -12,6 +12,7 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
 from bilba_dist.planning.gp import GPParams, features, propose
+from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.rollout import Motion
 
@@ -37,6 +38,7 @@ class ContactSearch:
     clock: Callable[[], float]
     max_motions: int = 4
     on_progress: Callable[[str, float], None] = field(default=lambda contact, best: None)
+    recorder: Recorder = field(default_factory=NullRecorder)
 
 
 @dataclass(frozen=True)
@@ -71,6 +73,9 @@ def make_contact(
             reason = f"no motion brought more particles into {mode} ({before}/{len(belief)})"
             return ContactOutcome(False, steps, belief, reason)
         steps.append(Step(best.candidate.motion, mode, best.score))
+        search.recorder.transition(
+            mode, best.candidate.motion, belief, best.posterior, best.score, best.count, True
+        )
         belief = best.posterior
         if best.count == len(belief):
             return ContactOutcome(True, steps, belief)
@@ -104,15 +109,24 @@ def best_motion(
     ]
     candidates = [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
     _check(search)
-    scored, winner = search.evaluator.score(belief, candidates, accept)
+
+    def record(s: Scored) -> None:
+        assert s.posterior is not None
+        search.recorder.transition(
+            mode, s.candidate.motion, belief, s.posterior, s.score, s.count, False
+        )
+
+    scored, winner = search.evaluator.score(belief, candidates, accept, record)
     best = winner or best_of(scored)
     _report(search, mode, best)
     for _ in range(search.gp.rounds if winner is None and scored else 0):
         _check(search)
         train = features([s.candidate.motion.G_d for s in scored])
-        proposals, _ = propose(train, np.array([s.score for s in scored]), search.gp, rng)
+        proposals, predicted = propose(train, np.array([s.score for s in scored]), search.gp, rng)
         batch = [Candidate(Motion(K, G_d, search.motion_timeout_s), None) for G_d in proposals]
-        more, winner = search.evaluator.score(belief, batch, accept)
+        more, winner = search.evaluator.score(belief, batch, accept, record)
+        simulated = max((s.score for s in more), default=0.0)
+        search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)
         scored += more
         best = winner or best_of(scored)
         _report(search, mode, best)

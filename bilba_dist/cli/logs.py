@@ -1,0 +1,82 @@
+"""`bilba logs …`: inspect planning logs."""
+
+import sys
+from pathlib import Path
+
+import click
+
+from bilba_dist.cli.main import user_errors
+from bilba_dist.record.reader import read_log, recover
+
+
+@click.group("logs")
+def logs() -> None:
+    """Inspect the MCAP logs of planning jobs."""
+
+
+@logs.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
+@user_errors
+def summary(files: tuple[Path, ...]) -> None:
+    """Task, planner, seed, duration, transitions, schedules and outcome of each log."""
+    click.echo(
+        f"{'file':<40} {'task':<12} {'planner':<15} {'seed':>4} {'time s':>7} "
+        f"{'trans':>6} {'sched':>5}  outcome"
+    )
+    for path in files:
+        log = read_log(path)
+        meta = log.metadata
+        outcome = (log.json("/outcome") or [{}])[-1]
+        if not outcome:
+            status = "unfinished"
+        elif outcome["success"]:
+            status = "plan found"
+        else:
+            status = f"no plan: {outcome['reason']}"
+        seconds = outcome.get("planning_time_s", float("nan"))
+        transitions = len(log.messages["/transition"])
+        click.echo(
+            f"{path.name:<40} {meta['task']['name']:<12} {meta['planner']:<15} {meta['seed']:>4} "
+            f"{seconds:7.1f} {transitions:>6} {len(log.messages['/schedule']):>5}  {status}"
+        )
+        if len(files) == 1:
+            for k, s in enumerate(log.json("/schedule")):
+                click.echo(
+                    f"  schedule {k}: "
+                    + " -> ".join(
+                        f"({e}, {m})" if e != "free" else "free" for e, m in s["schedule"]
+                    )
+                )
+
+
+@logs.command("plan")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), help="Write here instead of stdout."
+)
+@user_errors
+def plan_command(file: Path, out: Path | None) -> None:
+    """The plan recorded in a log: byte for byte the planner's plan file."""
+    log = read_log(file)
+    if not log.messages.get("/plan"):
+        from bilba_dist.errors import BilbaError
+
+        raise BilbaError(f"{file}: the log holds no plan (the job did not finish)")
+    data = log.messages["/plan"][-1]
+    if out is None:
+        sys.stdout.buffer.write(data)
+    else:
+        out.write_bytes(data)
+
+
+@logs.command("recover")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), help="[default: FILE.recovered.mcap]"
+)
+@user_errors
+def recover_command(file: Path, out: Path | None) -> None:
+    """Rewrite a truncated log into a valid one holding everything readable."""
+    out = out or file.with_suffix(".recovered.mcap")
+    kept = recover(file, out)
+    click.echo(f"{out}: {kept} messages recovered")

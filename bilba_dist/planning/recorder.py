@@ -1,0 +1,44 @@
+"""What the planner reports as it goes, for a log (`bilba_dist.record.writer.LogWriter`)."""
+
+from typing import Protocol
+
+from bilba_dist.belief.state import Belief
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.rollout import Motion
+
+
+class Recorder(Protocol):
+    def schedule(self, attempt: int, schedule: list[ContactPair]) -> None: ...
+
+    def pruned(self, edge: tuple[ContactPair, ContactPair], reason: str) -> None: ...
+
+    def transition(
+        self,
+        mode: ContactPair,
+        motion: Motion,
+        before: Belief,
+        after: Belief,
+        score: float,
+        count: int,
+        accepted: bool,
+    ) -> None: ...
+
+    def gp_round(
+        self, mode: ContactPair, training_size: int, predicted: float, simulated: float
+    ) -> None: ...
+
+
+class NullRecorder:
+    """Records nothing (``--no-log``)."""
+
+    def schedule(self, attempt: int, schedule: list[ContactPair]) -> None:
+        pass
+
+    def pruned(self, edge: tuple[ContactPair, ContactPair], reason: str) -> None:
+        pass
+
+    def transition(self, *args: object, **kwargs: object) -> None:
+        pass
+
+    def gp_round(self, *args: object, **kwargs: object) -> None:
+        pass

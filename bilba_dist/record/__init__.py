@@ -1,0 +1,1 @@
+"""MCAP logs of planning jobs: writing, schemas, reading, `bilba logs`."""

@@ -1,0 +1,105 @@
+"""Reading planning logs back: every message decoded, with one clear error for a bad file."""
+
+import json
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+
+from bilba_dist.errors import BilbaError
+
+MAGIC = b"\x89MCAP0\r\n"
+
+
+@dataclass
+class Log:
+    path: Path
+    messages: dict[str, list[bytes]] = field(default_factory=lambda: defaultdict(list))
+
+    def json(self, topic: str) -> list[dict[str, Any]]:
+        return [json.loads(data) for data in self.messages.get(topic, [])]
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        (first,) = self.json("/metadata")[:1] or [{}]
+        return first
+
+
+def _open(path: Path) -> bytes:
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise BilbaError(f"{path}: cannot read log: {exc.strerror or exc}") from None
+    if not data:
+        raise BilbaError(f"{path}: empty file, not an MCAP log")
+    if not data.startswith(MAGIC):
+        raise BilbaError(f"{path}: not an MCAP file")
+    return data
+
+
+def read_log(path: Path) -> Log:
+    """Every message of a complete log, CRCs checked."""
+    _open(path)
+    log = Log(path)
+    try:
+        with path.open("rb") as f:
+            for _, channel, message in make_reader(f, validate_crcs=True).iter_messages():
+                log.messages[channel.topic].append(message.data)
+    except (McapError, ValueError, EOFError, KeyError, OSError) as exc:
+        raise BilbaError(
+            f"{path}: truncated or corrupt MCAP ({type(exc).__name__}); "
+            "`bilba logs recover` rewrites what is readable"
+        ) from None
+    if "/metadata" not in log.messages:
+        raise BilbaError(f"{path}: an MCAP file, but not a bilba planning log (no /metadata)")
+    return log
+
+
+def recover(path: Path, out: Path) -> int:
+    """Rewrite every complete record of a (possibly truncated) log into a valid file at
+    ``out``; return the number of messages kept."""
+    import io
+
+    from mcap.records import Channel, Message, Schema
+
+    data = _open(path)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    messages: list[Message] = []
+    try:
+        for record in StreamReader(io.BytesIO(data), skip_magic=False, validate_crcs=True).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message):
+                messages.append(record)
+    except Exception:
+        pass
+    with out.open("wb") as f:
+        writer = Writer(f, use_chunking=False, compression=CompressionType.NONE)
+        writer.start(profile="bilba", library="bilba_dist recover")
+        schema_ids = {
+            sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()
+        }
+        channel_ids = {
+            cid: writer.register_channel(
+                c.topic, c.message_encoding, schema_ids[c.schema_id], dict(c.metadata)
+            )
+            for cid, c in channels.items()
+            if c.schema_id in schema_ids
+        }
+        kept = 0
+        for m in messages:
+            if m.channel_id in channel_ids:
+                writer.add_message(
+                    channel_ids[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence
+                )
+                kept += 1
+        writer.finish()
+    return kept
