@@ -19,7 +19,7 @@ from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, RolloutRe
 @dataclass(frozen=True)
 class Candidate:
     motion: Motion
-    made_for: int | None  # the particle it was sampled for (screened on it first), or None
+    screen_on: int | None  # simulated on this particle first, the rest only if it works there
 
 
 @dataclass(frozen=True)
@@ -71,11 +71,11 @@ class Evaluator:
         self, belief: Belief, batch: Sequence[Candidate], accept: Accept
     ) -> list[Scored]:
         n = len(belief)
-        own = [(c.made_for, c.motion) for c in batch if c.made_for is not None]
+        own = [(c.screen_on, c.motion) for c in batch if c.screen_on is not None]
         own_results = iter(self.run(belief, own))
         screened: list[dict[int, RolloutResult]] = []
         for c in batch:
-            first = {c.made_for: next(own_results)} if c.made_for is not None else {}
+            first = {c.screen_on: next(own_results)} if c.screen_on is not None else {}
             screened.append(first)
         rest = [
             (k, i)

@@ -123,7 +123,9 @@ def best_motion(
         _check(search)
         train = features([s.candidate.motion.G_d for s in scored])
         proposals, predicted = propose(train, np.array([s.score for s in scored]), search.gp, rng)
-        batch = [Candidate(Motion(K, G_d, search.motion_timeout_s), None) for G_d in proposals]
+        # Screen GP proposals on a particle not yet in the contact: the one they must move.
+        lagging = next((i for i, c in enumerate(belief.contacts) if not c & accept), 0)
+        batch = [Candidate(Motion(K, G_d, search.motion_timeout_s), lagging) for G_d in proposals]
         more, winner = search.evaluator.score(belief, batch, accept, record)
         simulated = max((s.score for s in more), default=0.0)
         search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)
