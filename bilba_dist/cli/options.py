@@ -12,6 +12,14 @@ uncertainty_option = click.option(
     "(axes grasp.|env. x y z roll pitch yaw; units m cm mm deg rad).",
 )
 
+workers_option = click.option(
+    "--workers",
+    type=int,
+    default=2,
+    show_default=True,
+    help="Ray rollout actors on a local Ray instance (or the cluster); 0 runs in-process.",
+)
+
 
 def split_uncertainty(values: tuple[str, ...]) -> list[str]:
     """Accept both ``-u a=1 -u b=2`` and ``-u "a=1 b=2"``."""

@@ -8,7 +8,12 @@ from typing import Any
 import click
 
 from bilba_dist.cli.main import user_errors
-from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
+from bilba_dist.cli.options import (
+    split_uncertainty,
+    task_argument,
+    uncertainty_option,
+    workers_option,
+)
 from bilba_dist.plan.file import dumps, plan_document, write_plan
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
@@ -29,13 +34,7 @@ EXIT_NO_PLAN = 1
     help="Plan file to write [default: plans/TASK-PLANNER-sSEED.json].",
 )
 @click.option("--timeout", type=float, help="Overall planning timeout [s] (task default: 900).")
-@click.option(
-    "--workers",
-    type=int,
-    default=2,
-    show_default=True,
-    help="Ray rollout actors; 0 runs in-process.",
-)
+@workers_option
 @click.option(
     "--address", help="Join this Ray cluster (auto or HOST:PORT) instead of starting one."
 )

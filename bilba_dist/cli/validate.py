@@ -6,6 +6,7 @@ import click
 
 from bilba_dist.belief.particles import initial_belief, make_particle, random_offsets
 from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.options import workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plan.file import read_plan
 from bilba_dist.plan.replay import replay, success_fraction
@@ -26,13 +27,7 @@ from bilba_dist.task.loader import load_task
 @click.option(
     "--seed", type=int, default=0, show_default=True, help="Seed for the held-out particles."
 )
-@click.option(
-    "--workers",
-    type=int,
-    default=2,
-    show_default=True,
-    help="Ray rollout actors; 0 runs in-process.",
-)
+@workers_option
 @user_errors
 def validate(
     plan_path: Path,
