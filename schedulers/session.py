@@ -2,13 +2,13 @@
 (the default: two CPUs, no dashboard), or on an existing Ray cluster (``--address``)."""
 
 import logging
+import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 from bilba_dist.errors import BilbaError
 from bilba_dist.rollout import DynamicsModel, RolloutBackend
 from bilba_dist.task.loader import Task
-from workers.rollout_worker import RolloutWorker
 
 
 @contextmanager
@@ -16,6 +16,8 @@ def ray_session(workers: int, address: str | None) -> Iterator[None]:
     """Start a local Ray instance with ``workers`` CPUs, or join the cluster at ``address``."""
     import ray
 
+    if address and address != "auto":
+        check_reachable(address)
     try:
         ray.init(
             address=address,
@@ -35,6 +37,21 @@ def ray_session(workers: int, address: str | None) -> Iterator[None]:
         ray.shutdown()
 
 
+def check_reachable(address: str, timeout_s: float = 3.0) -> None:
+    """Fail fast, in one line, when nothing listens at HOST:PORT (ray.init would retry for
+    minutes)."""
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise BilbaError(f"--address {address!r}: write auto or HOST:PORT")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as exc:
+        raise BilbaError(
+            f"cannot reach the Ray cluster at {address}: {exc.strerror or exc}"
+        ) from None
+
+
 @contextmanager
 def rollout_backend(
     task: Task,
@@ -44,6 +61,8 @@ def rollout_backend(
 ) -> Iterator[RolloutBackend]:
     """``workers`` = 0 runs in-process; otherwise a pool of that many Ray actors."""
     if workers == 0:
+        from workers.rollout_worker import RolloutWorker
+
         worker = RolloutWorker(task, model)
         try:
             yield worker

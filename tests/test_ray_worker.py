@@ -27,3 +27,50 @@ def test_ray_actor_gives_bit_identical_rollouts(local_ray):
     for a, b in zip(remote, local, strict=True):
         assert np.array_equal(a.state.q, b.state.q)
         assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
+
+
+def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_ray):
+    from bilba_dist.planning.bilba import plan
+    from workers.pool import RayPool
+
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
+    local = plan(task, RolloutWorker(task, "panda"), seed=4)
+    assert local.success
+    for workers in (1, 2):
+        pool = RayPool(task, workers)
+        remote = plan(task, pool, seed=4)
+        pool.close()
+        assert remote.rollouts == local.rollouts
+        assert [m.contact for m in remote.motions] == [m.contact for m in local.motions]
+        for a, b in zip(remote.motions, local.motions, strict=True):
+            assert np.array_equal(a.G_d.homogeneous, b.G_d.homogeneous)
+            assert np.array_equal(a.K, b.K)
+
+
+@pytest.mark.parametrize(
+    ("address", "message"),
+    [
+        ("127.0.0.1:1", "cannot reach the Ray cluster at 127.0.0.1:1"),
+        ("nowhere", "write auto or HOST:PORT"),
+    ],
+)
+def test_unreachable_cluster_is_one_line_and_exit_2(address, message, tmp_path):
+    from click.testing import CliRunner
+
+    from bilba_dist.cli.main import cli, register
+
+    register()
+    result = CliRunner().invoke(
+        cli,
+        [
+            "plan",
+            "peg-in-hole",
+            "--address",
+            address,
+            "--no-log",
+            "--out",
+            str(tmp_path / "p.json"),
+        ],
+    )
+    assert result.exit_code == 2
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
