@@ -126,7 +126,8 @@ def test_plan_command_without_a_plan_exits_1_and_keeps_the_result(tmp_path):
     register()
     out = tmp_path / "p.json"
     result = CliRunner().invoke(
-        cli, ["plan", "peg-in-hole", "--workers", "0", "--timeout", "0", "--out", str(out)]
+        cli,
+        ["plan", "peg-in-hole", "--workers", "0", "--timeout", "0", "--no-log", "--out", str(out)],
     )
     assert result.exit_code == 1, result.output
     assert "NO PLAN: timeout" in result.output
