@@ -15,6 +15,7 @@ from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.plan.file import plan_document, read_plan, write_plan
 from bilba_dist.plan.replay import replay
 from bilba_dist.planning.bilba import furthest_common, plan
+from bilba_dist.planning.result import PlanResult
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
 from bilba_dist.task.loader import load_task
 from workers.rollout_worker import RolloutWorker
@@ -158,3 +159,29 @@ def test_fixed_variant_uses_very_stiff_gains(pitch_plan):
     result = plan(task, worker, "bilba-fixed", seed=1, timeout_s=120)
     assert result.success, result.reason
     assert all(np.array_equal(m.K, VERY_STIFF) for m in result.motions)
+
+
+def test_floating_model_plan_is_validated_on_the_panda(pitch_plan):
+    task, panda, _ = pitch_plan
+    floating = RolloutWorker(task, "floating")
+    result = plan(task, floating, seed=0, validate_on=panda)
+    floating.close()
+    assert result.success, result.reason
+    final = replay(task, result.motions, initial_belief(task), panda)
+    assert result.final_belief is not None
+    assert final.contacts == result.final_belief.contacts  # the belief returned is the Panda's
+    assert all(task.goal in c for c in final.contacts)
+
+
+def test_a_plan_that_fails_on_the_panda_is_not_returned(pitch_plan):
+    task, panda, _ = pitch_plan
+    floating = RolloutWorker(task, "floating")
+    good = plan(task, floating, seed=0)
+    floating.close()
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.planning.bilba import _validate
+
+    broken = PlanResult(True, "", good.motions[:1], good.planner, good.seed)  # first motion only
+    _validate(task, broken, start_belief(task, initial_belief(task)), panda)
+    assert not broken.success
+    assert "failed validation on the Panda model" in broken.reason

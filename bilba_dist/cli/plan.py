@@ -36,6 +36,13 @@ EXIT_NO_PLAN = 1
 @click.option("--timeout", type=float, help="Overall planning timeout [s] (task default: 900).")
 @workers_option
 @click.option(
+    "--model",
+    type=click.Choice(["panda", "floating"]),
+    default="panda",
+    show_default=True,
+    help="Dynamics for planning; a floating-model plan is checked on the Panda before use.",
+)
+@click.option(
     "--address", help="Join this Ray cluster (auto or HOST:PORT) instead of starting one."
 )
 @click.option(
@@ -54,6 +61,7 @@ def plan_command(
     out: Path | None,
     timeout: float | None,
     workers: int,
+    model: str,
     address: str | None,
     log_path: Path | None,
     no_log: bool,
@@ -62,6 +70,7 @@ def plan_command(
     from tqdm import tqdm
 
     from schedulers.session import rollout_backend
+    from workers.rollout_worker import RolloutWorker
 
     loaded = load_task(task, split_uncertainty(uncertainty))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
@@ -69,7 +78,7 @@ def plan_command(
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
     log = None if no_log else LogWriter(log_path, loaded, planner, seed)
     with (
-        rollout_backend(loaded, workers, address) as backend,
+        rollout_backend(loaded, workers, address, model) as backend,  # type: ignore[arg-type]
         tqdm(unit=" rollouts", file=sys.stderr, dynamic_ncols=True) as bar,
     ):
 
@@ -78,7 +87,17 @@ def plan_command(
             bar.set_postfix_str(f"best score {progress.best_score:.2f}", refresh=False)
             bar.update(progress.rollouts - bar.n)
 
-        result = plan(loaded, backend, planner, seed, timeout, Progress(update=show), log)  # type: ignore[arg-type]
+        panda = RolloutWorker(loaded, "panda") if model == "floating" else None
+        result = plan(
+            loaded,
+            backend,
+            planner,  # type: ignore[arg-type]
+            seed,
+            timeout,
+            Progress(update=show),
+            log,
+            panda,
+        )
     document = plan_document(result, loaded)
     write_plan(document, out)
     if log is not None:

@@ -55,8 +55,12 @@ def plan(
     timeout_s: float | None = None,
     progress: Progress | None = None,
     recorder: Recorder | None = None,
+    validate_on: RolloutBackend | None = None,
 ) -> PlanResult:
-    """Plan for ``task``'s initial belief. Never raises for "no plan": the result says why."""
+    """Plan for ``task``'s initial belief. Never raises for "no plan": the result says why.
+
+    With ``validate_on`` (the Panda model, when ``backend`` simulates the faster floating
+    model), a plan is returned only if replaying it there brings every particle to the goal."""
     clock = time.perf_counter
     started = clock()
     progress = progress or Progress()
@@ -94,9 +98,25 @@ def plan(
         result.reason = f"no contact schedule: {exc}"
     except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
+    if result.success and validate_on is not None:
+        _validate(task, result, b0, validate_on)
     result.planning_time_s = clock() - started
     result.rollouts = evaluator.rollouts
     return result
+
+
+def _validate(task: Task, result: PlanResult, b0: Belief, backend: RolloutBackend) -> None:
+    from bilba_dist.plan.replay import replay
+
+    final = replay(task, result.motions, b0.particles, backend)
+    reached = sum(task.goal in c for c in final.contacts)
+    if reached < len(final):
+        result.success = False
+        result.reason = (
+            f"the plan failed validation on the Panda model: {reached}/{len(final)} "
+            f"particles reach {task.goal}"
+        )
+    result.final_belief = final
 
 
 def _attempts(
