@@ -56,7 +56,8 @@ def test_faces_at_names_every_face_through_a_point(point, faces):
     cube = convex_piece(
         "c", CUBE, pin.SE3.Identity(), {"top": [0, 0, 1], "right": [1, 0, 0], "back": [0, 1, 0]}
     )
-    assert set(cube.faces_at(np.array(point))) == faces
+    assert {cube.faces[i].name for i in cube.faces_at(np.array(point))} == faces
+    assert cube.faces_at(np.array(point) + 0.01) == []  # off the piece
 
 
 @pytest.mark.parametrize(

@@ -20,24 +20,14 @@ from bilba_dist.geometry.piece import ConvexPiece, Part
 #: link, whose margin cannot be zeroed): an edge contact lands ~0.3 mm off both faces. Face
 #: contacts are unaffected: their normal picks the one face.
 ON_FACE_TOL = 1.5e-3
-#: Environment faces within this angle of the contact normal are "the" face [rad].
+#: On either side, faces within this angle of the contact normal are "the" face [rad].
 NORMAL_ANGLE = np.deg2rad(3.0)
-
-
-def faces_through(piece: ConvexPiece, point: np.ndarray, tol: float = ON_FACE_TOL) -> list[int]:
-    """Indices of the faces of ``piece`` whose plane holds ``point``, if it is on the piece."""
-    normals = np.array([f.normal for f in piece.faces])
-    offsets = np.array([f.offset for f in piece.faces])
-    slack = normals @ point - offsets
-    if slack.max() > tol:
-        return []
-    return [int(i) for i in np.flatnonzero(np.abs(slack) <= tol)]
 
 
 def named_faces(pieces: Sequence[ConvexPiece], point: np.ndarray, normal: np.ndarray) -> list[str]:
     """The faces of ``pieces`` a contact at ``point`` names; ``normal`` is the outward
     normal the contact has on this side (both in the pieces' frame)."""
-    through = [(piece, i) for piece in pieces for i in faces_through(piece, point)]
+    through = [(piece, i) for piece in pieces for i in piece.faces_at(point, ON_FACE_TOL)]
     aligned = [
         (piece, i) for piece, i in through if piece.faces[i].normal @ normal >= np.cos(NORMAL_ANGLE)
     ]

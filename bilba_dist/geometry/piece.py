@@ -57,14 +57,15 @@ class ConvexPiece:
         known = ", ".join(f.name for f in self.faces)
         raise GeometryError(f"piece {self.name!r} has no face {name!r}; its faces: {known}")
 
-    def faces_at(self, point: np.ndarray, tol: float = 1e-6) -> list[str]:
-        """Names of the faces ``point`` (part frame) lies on: 1 inside a face, 2 on an edge,
-        3 or more at a corner. The same rule labels C-obs facets and simulated contacts."""
-        on = []
-        for face in self.faces:
-            if abs(float(face.normal @ point) - face.offset) <= tol:
-                on.append(face.name)
-        return on
+    def faces_at(self, point: np.ndarray, tol: float = 1e-6) -> list[int]:
+        """Indices of the faces whose plane holds ``point`` (part frame), if the point is on
+        the piece: 1 inside a face, 2 on an edge, 3 or more at a corner; [] off the piece."""
+        normals = np.array([f.normal for f in self.faces])
+        offsets = np.array([f.offset for f in self.faces])
+        slack = normals @ point - offsets
+        if slack.max() > tol:
+            return []
+        return [int(i) for i in np.flatnonzero(np.abs(slack) <= tol)]
 
 
 def box_piece(name: str, size: Sequence[float], X_PB: pin.SE3) -> ConvexPiece:
