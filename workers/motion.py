@@ -1,5 +1,5 @@
-"""Pieces both dynamics models share: damping from stiffness, the setpoint ramp, the
-settling test, and labelling the final contacts."""
+"""Pieces both dynamics models share: time accounting, damping from stiffness, the setpoint
+ramp's length, and labelling the final contacts."""
 
 import math
 from dataclasses import dataclass
@@ -16,16 +16,14 @@ from workers.settings import SimSettings
 
 @dataclass
 class SimStats:
-    """Where a world's time went: steps taken, seconds inside stepSimulation, rollouts."""
+    """Where a world's time went: steps taken and seconds inside stepSimulation."""
 
     steps: int = 0
     physics_s: float = 0.0
-    rollouts: int = 0
 
     def add(self, steps: int, physics_s: float) -> None:
         self.steps += steps
         self.physics_s += physics_s
-        self.rollouts += 1
 
 
 def damping(K: np.ndarray) -> np.ndarray:
@@ -43,11 +41,6 @@ def ramp_steps(X_start: pin.SE3, X_goal: pin.SE3, settings: SimSettings) -> int:
         settings.min_ramp_s,
     )
     return max(1, math.ceil(seconds / settings.timestep_s))
-
-
-def clip_norm(f: np.ndarray, limit: float) -> np.ndarray:
-    norm = float(np.linalg.norm(f))
-    return f * (limit / norm) if norm > limit else f
 
 
 def label_final_contacts(

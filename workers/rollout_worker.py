@@ -39,7 +39,6 @@ class RolloutWorker:
         self._floating: FloatingSim | None = None
         self.task = self._as_task(task)
         self.settings = self._task_settings(settings or SimSettings())
-        self.rollouts = 0
 
     def _task_settings(self, settings: SimSettings) -> SimSettings:
         planner = self.task.spec.planner
@@ -62,9 +61,7 @@ class RolloutWorker:
         self.settings = self._task_settings(self.settings)
 
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
-        results = [self._one(r) for r in requests]
-        self.rollouts += len(results)
-        return results
+        return [self._one(r) for r in requests]
 
     def _one(self, request: RolloutRequest) -> RolloutResult:
         particle = request.particle

@@ -5,7 +5,6 @@ A link of the robot is rigid by construction (a fixed constraint drifts and slow
 1.7×: PHYSICS.md). Box pieces are exact box shapes; other pieces are convex meshes.
 """
 
-import os
 import re
 import tempfile
 from pathlib import Path
@@ -76,9 +75,3 @@ def part_centre(part: Part) -> np.ndarray:
     """Centre of the part's vertices [m, part frame]: where its mass is put."""
     points = np.concatenate([p.vertices for p in part.pieces])
     return (points.min(axis=0) + points.max(axis=0)) / 2
-
-
-def remove_folder(folder: Path) -> None:
-    for entry in folder.iterdir():
-        entry.unlink()
-    os.rmdir(folder)

@@ -8,6 +8,8 @@ goal) counts as progress rather than failure."""
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import pinocchio as pin
+
 from bilba_dist.belief.particles import Particle
 from bilba_dist.geometry.contact import ContactPair, ContactSet
 from bilba_dist.rollout import ParticleState, RolloutResult
@@ -34,6 +36,14 @@ class Belief:
             tuple(r.state for r in results),
             tuple(r.contacts for r in results),
         )
+
+    def __getitem__(self, part: slice) -> "Belief":
+        """The belief of a slice of the particles."""
+        return Belief(self.particles[part], self.states[part], self.contacts[part])
+
+    def X_OM(self, i: int) -> pin.SE3:
+        """Particle ``i``'s manipuland in its environment frame."""
+        return self.particles[i].X_WO.inverse() * self.states[i].X_WM
 
     def count(self, accept: Accept) -> int:
         """Particles whose contact set holds one of the ``accept`` modes."""

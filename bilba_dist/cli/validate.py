@@ -10,7 +10,7 @@ from bilba_dist.cli.options import workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plan.file import read_plan
 from bilba_dist.plan.replay import replay, success_fraction
-from bilba_dist.task.loader import load_task
+from bilba_dist.task.loader import build_task, load_task
 
 
 @click.command("validate")
@@ -45,8 +45,6 @@ def validate(
     task = load_task(task_name or plan.task_name, overrides)
     if friction_scale != 1.0:
         spec = task.spec.model_copy(update={"friction": task.spec.friction * friction_scale})
-        from bilba_dist.task.loader import build_task
-
         task = build_task(spec, task.source)
     planning = initial_belief(task)
     bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
@@ -56,11 +54,11 @@ def validate(
     with rollout_backend(task, workers) as backend:
         final = replay(task, plan.motions, planning + extra, backend)
     n = len(planning)
-    planned = final.__class__(final.particles[:n], final.states[:n], final.contacts[:n])
+    planned = final[:n]
     click.echo(f"plan       {plan_path} ({len(plan.motions)} motions, task {task.name})")
     click.echo(f"planning belief: {success_fraction(planned, task):.3f} of {n} reach {task.goal}")
     if held_out:
-        rest = final.__class__(final.particles[n:], final.states[n:], final.contacts[n:])
+        rest = final[n:]
         fraction = success_fraction(rest, task)
         click.echo(
             f"held out:        {fraction:.3f} of {held_out} (seed {seed}, "

@@ -164,12 +164,7 @@ def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
 
 
 def _positions(belief: Belief) -> np.ndarray:
-    return np.array(
-        [
-            (p.X_WO.inverse() * s.X_WM).translation
-            for p, s in zip(belief.particles, belief.states, strict=True)
-        ]
-    )
+    return np.array([belief.X_OM(i).translation for i in range(len(belief))])
 
 
 def _planned(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
@@ -192,8 +187,7 @@ def _stiffness_rule(task: Task, variant: Variant) -> StiffnessRule:
 
     def variable(belief: Belief, mode: ContactPair, rng: np.random.Generator) -> np.ndarray:
         i = int(rng.integers(len(belief)))
-        X_OM = belief.particles[i].X_WO.inverse() * belief.states[i].X_WM
-        return variable_stiffness(task, mode, X_OM)
+        return variable_stiffness(task, mode, belief.X_OM(i))
 
     return variable
 

@@ -9,9 +9,6 @@ achieve the current desired contact for every particle").
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
-import numpy as np
-import pinocchio as pin
-
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, RolloutResult
 
@@ -100,11 +97,3 @@ class Evaluator:
 def best_of(scored: Sequence[Scored]) -> Scored | None:
     full = [s for s in scored if s.posterior is not None]
     return max(full, key=lambda s: s.score) if full else None
-
-
-def setpoints_of(scored: Sequence[Scored]) -> list[pin.SE3]:
-    return [s.candidate.motion.G_d for s in scored]
-
-
-def scores_of(scored: Sequence[Scored]) -> np.ndarray:
-    return np.array([s.score for s in scored])
