@@ -98,7 +98,7 @@ def test_killed_planner_leaves_a_readable_log_and_recover_makes_it_whole(tmp_pat
         stderr=subprocess.DEVNULL,
     )
     deadline = time.time() + 120
-    while time.time() < deadline and (not log.exists() or log.stat().st_size < 60_000):
+    while time.time() < deadline and (not log.exists() or log.stat().st_size < 80_000):
         time.sleep(0.2)
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
@@ -122,8 +122,73 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
     elif case == "truncated":
         data = planned[1].read_bytes()
         path.write_bytes(data[: len(data) // 2])
-    for command in (["logs", "summary"], ["logs", "plan"]):
+    for command in (["logs", "summary"], ["logs", "plan"], ["logs", "show"], ["logs", "plot"]):
         result = run(*command, str(path))
         assert result.exit_code == 2, (case, result.output)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and "Traceback" not in result.stderr
+
+
+def test_foxglove_scene_draws_every_particle_and_its_frames_follow_the_plan(planned):
+    _, log_path = planned
+    schemas = {}
+    with log_path.open("rb") as f:
+        for schema, channel, _ in make_reader(f).iter_messages(topics=["/scene", "/tf"]):
+            schemas[channel.topic] = schema.name
+    assert schemas == {"/scene": "foxglove.SceneUpdate", "/tf": "foxglove.FrameTransform"}
+    log = read_log(log_path)
+    scene = log.json("/scene")[0]
+    assert sorted(e["id"] for e in scene["entities"]) == [
+        "env/0", "env/1", "env/2", "part/0", "part/1", "part/2",
+    ]  # fmt: skip
+    for entity in scene["entities"]:
+        (mesh,) = entity["triangles"]
+        assert entity["frame_id"] == entity["id"].replace("/", "_") and entity["frame_locked"]
+        assert len(mesh["indices"]) % 3 == 0 and max(mesh["indices"]) < len(mesh["points"])
+    # The last transform of each manipuland frame is that particle after the last motion.
+    last = {tf["child_frame_id"]: tf for tf in log.json("/tf")}
+    final = [t for t in log.json("/transition") if t["accepted"]][-1]["after"]
+    for i, particle in enumerate(final):
+        tf = last[f"part_{i}"]
+        assert [tf["translation"][k] for k in "xyz"] == particle["X_WM"]["xyz"]
+        assert [tf["rotation"][k] for k in "xyzw"] == pytest.approx(particle["X_WM"]["quat_xyzw"])
+    assert all(tf["parent_frame_id"] == "world" for tf in last.values())
+
+
+def test_logs_show_prints_one_transition_and_rejects_a_missing_step(planned):
+    _, log = planned
+    transitions = read_log(log).json("/transition")
+    result = run("logs", "show", str(log), "--step", "-1")
+    assert result.exit_code == 0, result.output
+    assert f"step {len(transitions) - 1} of {len(transitions)}: ACCEPTED" in result.output
+    assert result.output.count("(floor/+z, peg/-z)") >= 4  # sought, and all 3 particles
+    missing = run("logs", "show", str(log), "--step", str(len(transitions)))
+    assert missing.exit_code == 2 and f"0..{len(transitions) - 1}" in missing.stderr
+
+
+def test_logs_plot_writes_a_png(planned, tmp_path):
+    _, log = planned
+    out = tmp_path / "fig.png"
+    result = run("logs", "plot", str(log), "--out", str(out))
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 20_000
+
+
+def test_logs_export_ndjson_holds_every_message_and_csv_every_particle(planned, tmp_path):
+    import csv
+
+    _, log_path = planned
+    log = read_log(log_path)
+    ndjson = run("logs", "export", str(log_path), "--format", "ndjson")
+    assert ndjson.exit_code == 0
+    lines = [json.loads(line) for line in ndjson.output.splitlines()]
+    assert len(lines) == sum(len(v) for v in log.messages.values())
+    assert [m["message"] for m in lines if m["topic"] == "/outcome"] == log.json("/outcome")
+    out = tmp_path / "t.csv"
+    assert run("logs", "export", str(log_path), "--format", "csv", "--out", str(out)).exit_code == 0
+    rows = list(csv.DictReader(out.open()))
+    transitions = log.json("/transition")
+    assert len(rows) == 3 * len(transitions)
+    last = rows[-1]
+    assert float(last["z_after"]) == transitions[-1]["after"][2]["X_WM"]["xyz"][2]
+    assert "floor/+z|peg/-z" in last["contacts_after"].split(";")

@@ -80,3 +80,47 @@ def recover_command(file: Path, out: Path | None) -> None:
     out = out or file.with_suffix(".recovered.mcap")
     kept = recover(file, out)
     click.echo(f"{out}: {kept} messages recovered")
+
+
+@logs.command()
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option(
+    "--step", type=int, default=0, show_default=True, help="Transition index (negative: from end)."
+)
+@user_errors
+def show(file: Path, step: int) -> None:
+    """The particles, contacts and motion of one transition."""
+    from bilba_dist.record.inspect import show as describe
+
+    click.echo(describe(read_log(file), step))
+
+
+@logs.command()
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), help="[default: FILE.png]")
+@user_errors
+def plot(file: Path, out: Path | None) -> None:
+    """PNG: score and particle spread per transition, and the schedules as they evolved."""
+    from bilba_dist.record.inspect import plot as draw
+
+    out = out or file.with_suffix(".png")
+    draw(read_log(file), out)
+    click.echo(f"{out}")
+
+
+@logs.command()
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--format", "fmt", type=click.Choice(["ndjson", "csv"]), default="ndjson")
+@click.option(
+    "--out", type=click.Path(dir_okay=False, path_type=Path), help="Write here instead of stdout."
+)
+@user_errors
+def export(file: Path, fmt: str, out: Path | None) -> None:
+    """Every message as JSON lines, or one CSV row per transition and particle."""
+    from bilba_dist.record.inspect import export as flatten
+
+    text = flatten(read_log(file), fmt)
+    if out is None:
+        click.echo(text, nl=False)
+    else:
+        out.write_text(text)

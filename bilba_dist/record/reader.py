@@ -20,6 +20,8 @@ MAGIC = b"\x89MCAP0\r\n"
 class Log:
     path: Path
     messages: dict[str, list[bytes]] = field(default_factory=lambda: defaultdict(list))
+    #: Every message in file order: (topic, log time [ns], data).
+    records: list[tuple[str, int, bytes]] = field(default_factory=list)
 
     def json(self, topic: str) -> list[dict[str, Any]]:
         return [json.loads(data) for data in self.messages.get(topic, [])]
@@ -50,6 +52,7 @@ def read_log(path: Path) -> Log:
         with path.open("rb") as f:
             for _, channel, message in make_reader(f, validate_crcs=True).iter_messages():
                 log.messages[channel.topic].append(message.data)
+                log.records.append((channel.topic, message.log_time, message.data))
     except (McapError, ValueError, EOFError, KeyError, OSError) as exc:
         raise BilbaError(
             f"{path}: truncated or corrupt MCAP ({type(exc).__name__}); "

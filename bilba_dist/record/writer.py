@@ -19,6 +19,8 @@ from mcap.writer import CompressionType, Writer
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.record.foxglove import SCHEMAS as FOXGLOVE_SCHEMAS
+from bilba_dist.record.foxglove import SceneMessages
 from bilba_dist.record.schemas import TOPICS
 from bilba_dist.rollout import Motion
 from bilba_dist.task.loader import Task
@@ -71,8 +73,10 @@ class LogWriter:
                     schema["title"], "jsonschema", json.dumps(schema).encode()
                 ),
             )
-            for topic, schema in TOPICS.items()
+            for topic, schema in {**TOPICS, **FOXGLOVE_SCHEMAS}.items()
         }
+        self._scene = SceneMessages(task.manipuland, task.environment)
+        self._scene_started = False
         self._sequence = 0
         self.transitions = 0
         header = {
@@ -94,9 +98,9 @@ class LogWriter:
         )
         self.write("/metadata", header)
 
-    def write(self, topic: str, message: dict[str, Any] | str) -> None:
+    def write(self, topic: str, message: dict[str, Any] | str, now: int | None = None) -> None:
         data = message if isinstance(message, str) else json.dumps(message, sort_keys=True)
-        now = time.time_ns()
+        now = now or time.time_ns()
         self._sequence += 1
         self._writer.add_message(self._channels[topic], now, data.encode(), now, self._sequence)
         self._file.flush()
@@ -118,6 +122,9 @@ class LogWriter:
         count: int,
         accepted: bool,
     ) -> None:
+        if not self._scene_started:
+            self._scene_started = True
+            self.draw(before)
         self.write(
             "/transition",
             {
@@ -136,6 +143,19 @@ class LogWriter:
             },
         )
         self.transitions += 1
+        if accepted:
+            self.draw(after)
+
+    def draw(self, belief: Belief) -> None:
+        """The belief as a Foxglove scene, at the start and after each accepted motion: the
+        parts (again each time, so a player that seeks past the start still has them) and
+        every particle's frames."""
+        now = time.time_ns()
+        self.write("/scene", self._scene.scene(len(belief), now), now)
+        for i, particle in enumerate(belief.particles):
+            self.write("/tf", self._scene.transform(f"env_{i}", particle.X_WO, now), now)
+        for i, state in enumerate(belief.states):
+            self.write("/tf", self._scene.transform(f"part_{i}", state.X_WM, now), now)
 
     def gp_round(
         self, mode: ContactPair, training_size: int, predicted: float, simulated: float
