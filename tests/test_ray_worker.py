@@ -47,6 +47,35 @@ def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_
             assert np.array_equal(a.K, b.K)
 
 
+def test_killing_a_worker_process_mid_plan_still_gives_the_same_plan(local_ray):
+    """The actor restarts (re-running its constructor) and its lost rollouts are retried."""
+    import os
+    import signal
+
+    from bilba_dist.planning.bilba import Progress, plan
+    from workers.pool import RayPool
+
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
+    local = plan(task, RolloutWorker(task, "panda"), seed=4)
+    pool = RayPool(task, 2)
+    victim = ray.get(pool.actors[0].pid.remote())
+    killed_at = []
+
+    def kill_once(progress: Progress) -> None:
+        if not killed_at and progress.rollouts >= 20:
+            os.kill(victim, signal.SIGKILL)
+            killed_at.append(progress.rollouts)
+
+    remote = plan(task, pool, seed=4, progress=Progress(update=kill_once))
+    restarted = ray.get(pool.actors[0].pid.remote())
+    pool.close()
+    assert killed_at and killed_at[0] < remote.rollouts  # killed mid-plan
+    assert restarted != victim
+    assert remote.rollouts == local.rollouts
+    for a, b in zip(remote.motions, local.motions, strict=True):
+        assert np.array_equal(a.G_d.homogeneous, b.G_d.homogeneous) and a.contact == b.contact
+
+
 @pytest.mark.parametrize(
     ("address", "message"),
     [

@@ -7,6 +7,7 @@ in-process and as a Ray actor (``ray.remote(RolloutWorker)``); a Ray actor gets 
 as a `TaskSpec`, which pickles, and builds its worlds in its own process.
 """
 
+import os
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -81,6 +82,10 @@ class RolloutWorker:
         if self._floating is None:
             self._floating = FloatingSim(self.task, self.settings)
         return self._floating
+
+    def pid(self) -> int:
+        """The process simulating (a Ray actor's worker process: tests kill it)."""
+        return os.getpid()
 
     def close(self) -> None:
         for sim in self._panda.values():

@@ -43,7 +43,15 @@ def main() -> None:
 
 def register() -> None:
     """Attach the sub-commands (imported here so `bilba --help` stays quick)."""
-    from bilba_dist.cli import graph, logs, plan, tasks, validate
+    from bilba_dist.cli import batch, graph, logs, plan, tasks, validate
 
-    for command in (tasks.tasks, graph.graph, plan.plan_command, validate.validate, logs.logs):
+    for command in (
+        tasks.tasks,
+        graph.graph,
+        plan.plan_command,
+        validate.validate,
+        logs.logs,
+        batch.batch,
+        batch.report,
+    ):
         cli.add_command(command)

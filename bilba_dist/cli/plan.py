@@ -3,7 +3,6 @@
 import sys
 import time
 from pathlib import Path
-from typing import Any
 
 import click
 
@@ -101,7 +100,7 @@ def plan_command(
     document = plan_document(result, loaded)
     write_plan(document, out)
     if log is not None:
-        log.finish(dumps(document), outcome(result))
+        log.finish(dumps(document), result.outcome())
     summary(result, loaded, out)
     if log is not None:
         click.echo(f"log        {log.path} ({log.transitions} transitions)")
@@ -126,12 +125,3 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
         for i, contacts in enumerate(result.final_belief.contacts):
             click.echo(f"particle {i}: {', '.join(sorted(map(str, contacts))) or 'free'}")
     click.echo(f"plan file  {out}")
-
-
-def outcome(result: PlanResult) -> dict[str, Any]:
-    return {
-        "success": result.success,
-        "reason": result.reason,
-        "planning_time_s": result.planning_time_s,
-        "rollouts": result.rollouts,
-    }

@@ -1,6 +1,7 @@
 """What a planner returns: always a result that says whether it worked and why not."""
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -36,3 +37,12 @@ class PlanResult:
     schedules: list[list[ContactPair]] = field(default_factory=list)
     pruned: list[tuple[ContactPair, ContactPair]] = field(default_factory=list)
     final_belief: Belief | None = None
+
+    def outcome(self) -> dict[str, Any]:
+        """Success, why not, time and rollouts: the log's /outcome and a batch record."""
+        return {
+            "success": self.success,
+            "reason": self.reason,
+            "planning_time_s": self.planning_time_s,
+            "rollouts": self.rollouts,
+        }

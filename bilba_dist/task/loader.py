@@ -83,7 +83,7 @@ def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Ta
     try:
         spec = TaskSpec.model_validate(data)
     except ValidationError as exc:
-        raise TaskError(_describe(exc, source, lines)) from None
+        raise TaskError(describe_error(exc, source, lines)) from None
     try:
         return build_task(spec, source)
     except BilbaError as exc:
@@ -157,8 +157,14 @@ def build_part(spec: PartSpec) -> Part:
     return Part(spec.name, tuple(pieces))
 
 
-def _describe(exc: ValidationError, source: str, lines: dict[Location, int]) -> str:
-    """One line for the first validation error: file, line, key path, and what is wrong."""
+def describe_error(
+    exc: ValidationError,
+    source: str,
+    lines: dict[Location, int],
+    root: type[BaseModel] = TaskSpec,
+) -> str:
+    """One line for the first validation error of a YAML file validated by model ``root``:
+    file, line, key path, and what is wrong."""
     errors = exc.errors()
     first = errors[0]
     loc: Location = tuple(first["loc"])
@@ -166,7 +172,7 @@ def _describe(exc: ValidationError, source: str, lines: dict[Location, int]) -> 
     where = f"{source}:{line}" if line is not None else source
     key = _dotted(loc)
     if first["type"] == "extra_forbidden":
-        allowed = _allowed_keys(loc[:-1])
+        allowed = _allowed_keys(loc[:-1], root)
         message = f"unknown key {loc[-1]!r}" + (
             f"; allowed: {', '.join(allowed)}" if allowed else ""
         )
@@ -188,9 +194,9 @@ def _dotted(loc: Location) -> str:
     return text
 
 
-def _allowed_keys(loc: Location) -> list[str]:
-    """The keys allowed at ``loc`` in the task schema, found by walking the models."""
-    candidates: list[type[BaseModel]] = [TaskSpec]
+def _allowed_keys(loc: Location, root: type[BaseModel]) -> list[str]:
+    """The keys allowed at ``loc`` in the schema ``root``, found by walking the models."""
+    candidates: list[type[BaseModel]] = [root]
     for part in loc:
         if isinstance(part, int):
             continue

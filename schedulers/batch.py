@@ -1,0 +1,198 @@
+"""Running a grid of planning jobs on Ray, one JSON-lines record per finished job.
+
+Each job is one Ray task (one CPU) that plans with its rollouts in-process: across a grid,
+jobs side by side keep every core busy with no batching overhead, where splitting one plan's
+small rollout batches over actors does not (README: scaling). The job sends its plan text and
+MCAP log back to the driver, which alone writes under DIR — so a cluster needs no shared
+filesystem, and a job is recorded exactly once: when its result arrives. Ray re-runs a job
+whose node or worker process died (``max_retries``); a seeded plan comes out the same.
+
+``DIR/records.jsonl`` is appended and fsynced per job; ``--resume`` skips every job with a
+record and runs the rest (those never started and those interrupted). A torn last line (a
+killed driver) is ignored and that job runs again.
+"""
+
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from bilba_dist.errors import BilbaError
+from bilba_dist.task.loader import build_task
+from bilba_dist.task.schema import TaskSpec
+from schedulers.jobs import Batch, Job
+
+RECORDS = "records.jsonl"
+#: Ray re-runs a job this many times after a system failure (a dead node or process).
+JOB_RETRIES = 3
+
+
+def execute_job(job: Job, spec: TaskSpec, source: str) -> dict[str, Any]:
+    """Plan one job in this process; return its outcome, plan text and log bytes."""
+    from bilba_dist.plan.file import dumps, plan_document
+    from bilba_dist.planning.bilba import plan
+    from bilba_dist.record.writer import LogWriter
+    from workers.rollout_worker import RolloutWorker
+
+    task = build_task(spec, source)
+    worker = RolloutWorker(task, job.model)  # type: ignore[arg-type]
+    panda = RolloutWorker(task, "panda") if job.model == "floating" else None
+    with tempfile.TemporaryDirectory() as folder:
+        log = LogWriter(Path(folder) / "log.mcap", task, job.planner, job.seed)
+        result = plan(
+            task,
+            worker,
+            job.planner,  # type: ignore[arg-type]
+            job.seed,
+            job.timeout_s,
+            recorder=log,
+            validate_on=panda,
+        )
+        text = dumps(plan_document(result, task))
+        log.finish(text, result.outcome())
+        log_bytes = log.path.read_bytes()
+    worker.close()
+    if panda is not None:
+        panda.close()
+    if result.success:
+        status = "success"
+    elif result.reason.startswith("timeout"):
+        status = "timeout"
+    else:
+        status = "no-plan"
+    return {
+        "status": status,
+        **result.outcome(),
+        "host": platform.node(),
+        "plan_text": text,
+        "log_bytes": log_bytes,
+    }
+
+
+@dataclass
+class Counts:
+    total: int
+    skipped: int = 0
+    done: int = 0
+    failed: int = 0  # no plan, timeout or error
+    running: int = 0
+
+
+def read_records(out: Path) -> list[dict[str, Any]]:
+    """The records in DIR, skipping a torn last line."""
+    path = out / RECORDS
+    if not path.exists():
+        return []
+    records = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            continue
+    return records
+
+
+def _drop_torn_line(out: Path) -> None:
+    """Cut a last line that a killed driver left half-written, so appends stay lines."""
+    path = out / RECORDS
+    if not path.exists():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        path.write_bytes(data[: data.rfind(b"\n") + 1])
+
+
+def _append(out: Path, record: dict[str, Any]) -> None:
+    with (out / RECORDS).open("a", encoding="utf-8") as f:
+        f.write(json.dumps(record, sort_keys=True) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _store(out: Path, job: Job, result: dict[str, Any]) -> dict[str, Any]:
+    """Write the job's plan and log under DIR; return its record."""
+    record: dict[str, Any] = {k: v for k, v in asdict(job).items()}
+    record["uncertainty"] = list(job.uncertainty)
+    if "plan_text" in result:
+        plan, log = Path("plans") / f"{job.id}.json", Path("logs") / f"{job.id}.mcap"
+        for relative, data in ((plan, result["plan_text"].encode()), (log, result["log_bytes"])):
+            (out / relative).parent.mkdir(parents=True, exist_ok=True)
+            (out / relative).write_bytes(data)
+        record.update(plan=str(plan), log=str(log))
+    record.update({k: v for k, v in result.items() if k not in ("plan_text", "log_bytes")})
+    record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    return record
+
+
+def run_batch(
+    batch: Batch,
+    out: Path,
+    resume: bool = False,
+    workers: int = 2,
+    address: str | None = None,
+    on_progress: Callable[[Counts], None] = lambda counts: None,
+) -> Counts:
+    """Run every job of ``batch`` not yet recorded in ``out``; return the counts."""
+    import ray
+
+    from schedulers.session import ray_session
+
+    recorded = {r["id"] for r in read_records(out)}
+    if recorded and not resume:
+        raise BilbaError(
+            f"{out} already holds {len(recorded)} job records; "
+            "add --resume to run only what is missing, or choose another --out"
+        )
+    out.mkdir(parents=True, exist_ok=True)
+    _drop_torn_line(out)
+    todo = [job for job in batch.jobs if job.id not in recorded]
+    counts = Counts(total=len(batch.jobs), skipped=len(batch.jobs) - len(todo))
+    on_progress(counts)
+    if not todo:
+        return counts
+    with ray_session(workers, address):
+        remote = ray.remote(num_cpus=1, max_retries=JOB_RETRIES)(execute_job)
+        pending = {
+            remote.remote(job, batch.spec(job), batch.tasks[(job.task, job.setting)].source): job
+            for job in todo
+        }
+        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
+        while pending:
+            counts.running = min(len(pending), cpus)
+            on_progress(counts)
+            ready, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            for ref in ready:
+                job = pending.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except ray.exceptions.RayError as exc:
+                    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+                    result = {"status": "error", "reason": f"{type(exc).__name__}: {first}"}
+                _append(out, _store(out, job, result))
+                counts.done += 1
+                counts.failed += result["status"] != "success"
+        counts.running = 0
+        on_progress(counts)
+    return counts
+
+
+def progress_bar(total: int) -> tuple[Callable[[Counts], None], Callable[[], None]]:
+    """A tqdm bar showing done/running/failed; returns (update, close)."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=total, unit=" jobs", file=sys.stderr, dynamic_ncols=True)
+
+    def update(counts: Counts) -> None:
+        bar.set_postfix_str(
+            f"running {counts.running}, failed {counts.failed}, skipped {counts.skipped}",
+            refresh=False,
+        )
+        bar.update(counts.skipped + counts.done - bar.n)
+
+    return update, bar.close

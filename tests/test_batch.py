@@ -1,0 +1,202 @@
+"""Batch grids on a real local Ray: records, resume after an interrupted driver, timeouts,
+the report, a lost node, and a batch submitted with `ray job submit`."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from bilba_dist.cli.main import cli, register
+from schedulers.batch import RECORDS, read_records, run_batch
+from schedulers.jobs import load_jobs
+
+ROOT = Path(__file__).resolve().parents[1]
+SMOKE = ROOT / "deploy" / "jobs" / "smoke.yaml"  # 4 jobs: peg pitch, 2 planners × 2 seeds
+BIN = Path(sys.executable).parent
+
+
+def run(*args: str):
+    register()
+    return CliRunner().invoke(cli, list(args))
+
+
+def wait_for_records(out: Path, n: int, timeout_s: float = 180) -> None:
+    deadline = time.time() + timeout_s
+    while len(read_records(out)) < n:
+        assert time.time() < deadline, f"no {n} records in {timeout_s} s"
+        time.sleep(0.2)
+
+
+def motions(folder: Path, record: dict) -> list:
+    return json.loads((folder / record["plan"]).read_text())["motions"]
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            "name: a\ntasks: [peg-in-hole]\nseed: 3\n",
+            "jobs.yaml:3: seed: unknown key 'seed'; allowed:",
+        ),
+        ("name: a\ntasks: [peg-in-hole]\nplanners: [b-est]\n", "jobs.yaml:3: planners[0]:"),
+        ("name: a\ntasks: [no-such-task]\n", "task 'no-such-task', setting 'task'"),
+        (
+            "name: a\ntasks: [peg-in-hole]\nuncertainty: {x: [grasp.x=1parsec]}\n",
+            "task 'peg-in-hole', setting 'x'",
+        ),
+    ],
+)
+def test_a_bad_jobs_file_is_one_line_and_exit_2_before_ray_starts(text, message, tmp_path):
+    jobs = tmp_path / "jobs.yaml"
+    jobs.write_text(text)
+    result = run("batch", str(jobs), "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2, result.output
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_paper_grid_expands_to_30_distinct_jobs():
+    batch = load_jobs(ROOT / "deploy" / "jobs" / "paper.yaml")
+    assert len(batch.jobs) == 30 and len({j.id for j in batch.jobs}) == 30
+    assert {j.setting for j in batch.jobs} == {"pitch", "x", "y"}
+    assert batch.spec(batch.jobs[0]).uncertainty == pytest.approx({"grasp.pitch": 0.0349066}, 1e-5)
+
+
+@pytest.fixture(scope="module")
+def smoke_batch(tmp_path_factory):
+    """The smoke grid, its driver interrupted (SIGINT) after the first record, a torn record
+    line appended as a killed driver would leave it, then finished with --resume."""
+    out = tmp_path_factory.mktemp("batch") / "smoke"
+    driver = subprocess.Popen(
+        [BIN / "bilba", "batch", SMOKE, "--out", out, "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_records(out, 1)
+    driver.send_signal(signal.SIGINT)
+    _, err = driver.communicate(timeout=60)
+    before = read_records(out)
+    with (out / RECORDS).open("a") as f:
+        f.write('{"id": "peg-in-hole-pitch-bil')  # torn: a killed driver mid-write
+    resumed = run("batch", str(SMOKE), "--out", str(out), "--resume")
+    return out, driver.returncode, err, before, resumed
+
+
+def test_interrupted_batch_resumes_running_only_what_was_missing(smoke_batch):
+    out, code, err, before, resumed = smoke_batch
+    assert code == 130 and "--resume" in err
+    assert 1 <= len(before) < 4
+    assert resumed.exit_code == 0, resumed.output
+    assert f"{4 - len(before)} jobs run" in resumed.output
+    assert f"{len(before)} already recorded" in resumed.output
+    records = read_records(out)
+    ids = [r["id"] for r in records]
+    assert sorted(ids) == sorted(j.id for j in load_jobs(SMOKE).jobs)  # each job exactly once
+    assert all(r["status"] == "success" for r in records)
+    for r in records:
+        assert (out / r["log"]).stat().st_size > 0
+        assert json.loads((out / r["plan"]).read_text())["seed"] == r["seed"]
+
+
+def test_a_finished_batch_folder_is_not_overwritten_without_resume(smoke_batch):
+    out = smoke_batch[0]
+    result = run("batch", str(SMOKE), "--out", str(out))
+    assert result.exit_code == 2 and "already holds 4 job records" in result.stderr
+
+
+def test_report_prints_the_table_and_writes_a_png(smoke_batch, tmp_path):
+    out = smoke_batch[0]
+    png = tmp_path / "r.png"
+    result = run("report", str(out), "--png", str(png))
+    assert result.exit_code == 0, result.output
+    rows = [line for line in result.output.splitlines() if line.startswith("peg-in-hole")]
+    assert len(rows) == 2 and all("2/2" in row and "±" in row for row in rows)
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    missing = run("report", str(tmp_path / "nothing"))
+    assert missing.exit_code == 2 and "no records.jsonl" in missing.stderr
+
+
+def test_a_job_that_runs_out_of_time_is_recorded_as_a_timeout(tmp_path):
+    jobs = tmp_path / "jobs.yaml"
+    jobs.write_text(
+        "name: t\ntasks: [peg-in-hole]\nuncertainty: {x: [grasp.x=1cm]}\ntimeout_s: 1\n"
+    )
+    out = tmp_path / "out"
+    counts = run_batch(load_jobs(jobs), out, workers=1)
+    (record,) = read_records(out)
+    assert counts.failed == 1 and record["status"] == "timeout"
+    assert record["reason"].startswith("timeout") and (out / record["plan"]).exists()
+    table = run("report", str(out))
+    assert table.exit_code == 0 and " * " in table.output.splitlines()[1] + " "
+
+
+def test_a_node_lost_mid_batch_still_records_every_job_once_with_the_same_plans(smoke_batch):
+    from ray.cluster_utils import Cluster
+
+    reference = {r["id"]: motions(smoke_batch[0], r) for r in read_records(smoke_batch[0])}
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})
+    nodes = [cluster.add_node(num_cpus=1) for _ in range(2)]
+    cluster.wait_for_nodes()
+    out = Path(cluster.head_node.get_session_dir_path()).parent / "lost-node-batch"
+    lost = threading.Event()
+
+    def remove_a_node_once_the_first_job_is_in():
+        wait_for_records(out, 1)
+        time.sleep(1.0)  # the next two jobs are running, one of them on nodes[0]
+        cluster.remove_node(nodes[0])
+        lost.set()
+
+    killer = threading.Thread(target=remove_a_node_once_the_first_job_is_in, daemon=True)
+    killer.start()
+    try:
+        run_batch(load_jobs(SMOKE), out, address=cluster.address)
+    finally:
+        cluster.shutdown()
+    killer.join(5)
+    assert lost.is_set()
+    records = read_records(out)
+    assert sorted(r["id"] for r in records) == sorted(reference)
+    for r in records:
+        assert r["status"] == "success" and motions(out, r) == reference[r["id"]]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_a_batch_submitted_with_ray_job_submit_completes(tmp_path):
+    """`ray start --head`, then `ray job submit -- bilba batch …` (DESIGN.md: Ray 2.60 needs
+    RAY_AUTH_MODE=token on the submitting side). `ray stop` at the end stops every Ray
+    process of this user, so this test must not share the machine with another Ray."""
+    env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
+    port, dashboard = _free_port(), _free_port()
+    subprocess.run(
+        [BIN / "ray", "start", "--head", "--num-cpus=2", f"--port={port}",
+         "--dashboard-host=127.0.0.1", f"--dashboard-port={dashboard}",
+         "--include-dashboard=true", "--disable-usage-stats"],
+        env=env, check=True, capture_output=True, timeout=120,
+    )  # fmt: skip
+    out = tmp_path / "out"
+    try:
+        submitted = subprocess.run(
+            [BIN / "ray", "job", "submit", f"--address=http://127.0.0.1:{dashboard}", "--",
+             "bilba", "batch", str(SMOKE), "--address", "auto", "--out", str(out)],
+            env={**env, "RAY_AUTH_MODE": "token"}, capture_output=True, text=True, timeout=400,
+        )  # fmt: skip
+    finally:
+        subprocess.run([BIN / "ray", "stop"], env=env, capture_output=True, timeout=120)
+    assert submitted.returncode == 0, submitted.stdout[-2000:] + submitted.stderr[-2000:]
+    assert "4 jobs run (0 without a plan)" in submitted.stdout
+    assert len(read_records(out)) == 4
