@@ -82,6 +82,7 @@ class Counts:
     done: int = 0
     failed: int = 0  # no plan, timeout or error
     running: int = 0
+    elapsed_s: float = 0.0  # from submitting the first job to recording the last
 
 
 def read_records(out: Path) -> list[dict[str, Any]]:
@@ -157,6 +158,7 @@ def run_batch(
     if not todo:
         return counts
     with ray_session(workers, address):
+        started = time.perf_counter()
         remote = ray.remote(num_cpus=1, max_retries=JOB_RETRIES)(execute_job)
         pending = {
             remote.remote(job, batch.spec(job), batch.tasks[(job.task, job.setting)].source): job
@@ -178,6 +180,7 @@ def run_batch(
                 counts.done += 1
                 counts.failed += result["status"] != "success"
         counts.running = 0
+        counts.elapsed_s = time.perf_counter() - started
         on_progress(counts)
     return counts
 

@@ -54,8 +54,9 @@ def batch(
         sys.exit(EXIT_INTERRUPTED)
     close()
     click.echo(
-        f"{out}: {counts.done} jobs run ({counts.failed} without a plan), "
-        f"{counts.skipped} already recorded, {counts.total} in the grid"
+        f"{out}: {counts.done} jobs run in {counts.elapsed_s:.0f} s "
+        f"({counts.failed} without a plan), {counts.skipped} already recorded, "
+        f"{counts.total} in the grid"
     )
 
 
