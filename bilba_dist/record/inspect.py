@@ -44,7 +44,7 @@ def show(log: Log, step: int) -> str:
         f"quat xyzw [{' '.join(f'{v:+.4f}' for v in motion['G_d']['quat_xyzw'])}], "
         f"timeout {motion['timeout_s']:g} s",
         f"         K diagonal [{' '.join(f'{v:.0f}' for v in np.diag(K))}] "
-        "(N/m, N·m/rad; rotation first)",
+        "(rotation N·m/rad, then translation N/m)",
         f"score    {t['score']:.3f}, {t['count']} of {len(t['after'])} particles in the contact",
         f"{'particle':<9}{'before xyz [mm]':<27}{'after xyz [mm]':<27}contacts after",
     ]
