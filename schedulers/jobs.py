@@ -27,7 +27,7 @@ from bilba_dist.task.loader import Task, describe_error, load_task
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.task.yaml_lines import load_yaml_with_lines, read_text
 
-Planner = Literal["bilba-variable", "bilba-fixed"]
+Planner = Literal["bilba-variable", "bilba-fixed", "b-est"]
 assert set(Planner.__args__) == set(PLANNERS)  # type: ignore[attr-defined]
 
 

@@ -46,7 +46,7 @@ def motions(folder: Path, record: dict) -> list:
             "name: a\ntasks: [peg-in-hole]\nseed: 3\n",
             "jobs.yaml:3: seed: unknown key 'seed'; allowed:",
         ),
-        ("name: a\ntasks: [peg-in-hole]\nplanners: [b-est]\n", "jobs.yaml:3: planners[0]:"),
+        ("name: a\ntasks: [peg-in-hole]\nplanners: [rrt]\n", "jobs.yaml:3: planners[0]:"),
         ("name: a\ntasks: [no-such-task]\n", "task 'no-such-task', setting 'task'"),
         (
             "name: a\ntasks: [peg-in-hole]\nuncertainty: {x: [grasp.x=1parsec]}\n",

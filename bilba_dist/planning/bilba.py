@@ -33,8 +33,8 @@ from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
 
-Variant = Literal["bilba-variable", "bilba-fixed"]
-PLANNERS: tuple[Variant, ...] = ("bilba-variable", "bilba-fixed")
+Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
+PLANNERS: tuple[Variant, ...] = ("bilba-variable", "bilba-fixed", "b-est")
 
 
 @dataclass
@@ -61,9 +61,17 @@ def plan(
 
     With ``validate_on`` (the Panda model, when ``backend`` simulates the faster floating
     model), a plan is returned only if replaying it there brings every particle to the goal."""
+    progress = progress or Progress()
+    if variant == "b-est":
+        from bilba_dist.planning.best import plan_best
+
+        result = plan_best(task, backend, seed, timeout_s, recorder, lambda n: _count(progress, n))
+        if result.success and validate_on is not None:
+            b0 = start_belief(task, initial_belief(task))
+            _validate(task, result, b0, validate_on)
+        return result
     clock = time.perf_counter
     started = clock()
-    progress = progress or Progress()
     rng = np.random.default_rng(seed)
     params = task.spec.planner
     particles = initial_belief(task)
@@ -83,6 +91,7 @@ def plan(
             params.gp_noise,
             params.gp_simulated,
             params.gp_rounds,
+            params.gp_patience,
             params.gp_restarts,
         ),
         motion_timeout_s=params.motion_timeout_s,
@@ -148,7 +157,7 @@ def _attempts(
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
             if mode == task.goal:
                 result.success, result.reason = True, ""
-                result.motions = _planned(steps, b0, panda)
+                result.motions = planned_motions(steps, b0, panda)
                 result.final_belief = belief
                 return
             graph.reweight(_positions(belief))
@@ -167,7 +176,7 @@ def _positions(belief: Belief) -> np.ndarray:
     return np.array([belief.X_OM(i).translation for i in range(len(belief))])
 
 
-def _planned(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
+def planned_motions(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
     """Attach the joint setpoint (IK from the nominal particle's start) to each motion."""
     q = b0.states[0].q
     planned = []

@@ -19,6 +19,7 @@ class GPParams:
     noise: float = 0.02  # ± uniform, per log-space coordinate
     simulated: int = 31  # best predicted test points simulated per round
     rounds: int = 3
+    patience: int = 1  # rounds in a row without a better score before the GP gives up
     restarts: int = 9
     max_train: int = 128  # fit on the best-scored this many: a fit is O(n³) per optimiser
     # step, and 300+ points made GP fitting 10 % of a peg plan (profiled)

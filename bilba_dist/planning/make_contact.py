@@ -119,6 +119,7 @@ def best_motion(
     scored, winner = search.evaluator.score(belief, candidates, accept, record)
     best = winner or best_of(scored)
     _report(search, mode, best)
+    idle = 0  # GP rounds in a row without a better score
     for _ in range(search.gp.rounds if winner is None and scored else 0):
         _check(search)
         train = features([s.candidate.motion.G_d for s in scored])
@@ -130,9 +131,13 @@ def best_motion(
         simulated = max((s.score for s in more), default=0.0)
         search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)
         scored += more
+        previous = best.score if best is not None else 0.0
         best = winner or best_of(scored)
         _report(search, mode, best)
         if winner is not None:
+            break
+        idle = idle + 1 if best is None or best.score <= previous else 0
+        if idle >= search.gp.patience:
             break
     return best
 
