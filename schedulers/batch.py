@@ -118,7 +118,7 @@ def _append(out: Path, record: dict[str, Any]) -> None:
 
 def _store(out: Path, job: Job, result: dict[str, Any]) -> dict[str, Any]:
     """Write the job's plan and log under DIR; return its record."""
-    record: dict[str, Any] = {k: v for k, v in asdict(job).items()}
+    record: dict[str, Any] = asdict(job)
     record["uncertainty"] = list(job.uncertainty)
     if "plan_text" in result:
         plan, log = Path("plans") / f"{job.id}.json", Path("logs") / f"{job.id}.mcap"
