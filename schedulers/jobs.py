@@ -22,20 +22,17 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from bilba_dist.errors import BilbaError
-from bilba_dist.planning.bilba import PLANNERS
+from bilba_dist.planning.bilba import Variant
 from bilba_dist.task.loader import Task, describe_error, load_task
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.task.yaml_lines import load_yaml_with_lines, read_text
-
-Planner = Literal["bilba-variable", "bilba-fixed", "b-est"]
-assert set(Planner.__args__) == set(PLANNERS)  # type: ignore[attr-defined]
 
 
 def _task_bounds() -> dict[str, list[str]]:
     return {"task": []}
 
 
-def _default_planners() -> list[Planner]:
+def _default_planners() -> list[Variant]:
     return ["bilba-variable"]
 
 
@@ -45,7 +42,7 @@ class JobsSpec(BaseModel):
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
     tasks: list[str] = Field(min_length=1)
     uncertainty: dict[str, list[str]] = Field(default_factory=_task_bounds)
-    planners: list[Planner] = Field(default_factory=_default_planners, min_length=1)
+    planners: list[Variant] = Field(default_factory=_default_planners, min_length=1)
     seeds: int | list[int] = 1
     timeout_s: float = Field(default=900.0, gt=0)
     model: Literal["panda", "floating"] = "panda"

@@ -6,7 +6,6 @@ idle), and returns the results in request order, so a seeded plan is the same on
 or on N."""
 
 from collections.abc import Sequence
-from typing import Any
 
 from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
 from bilba_dist.task.loader import Task
@@ -28,8 +27,9 @@ class RayPool:
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
         if not requests:
             return []
-        if len(self.actors) == 1:
-            return ray_get_one(self._ray, self.actors[0], requests)
+        if len(self.actors) == 1:  # one call: groups only help to balance several actors
+            ref = self.actors[0].simulate.remote(list(requests))  # type: ignore[attr-defined]
+            return list(self._ray.get(ref))
         size = max(1, len(requests) // (4 * len(self.actors)))  # ~4 groups per actor
         groups = [list(requests[i : i + size]) for i in range(0, len(requests), size)]
         done = self._pool.map(lambda actor, group: actor.simulate.remote(group), groups)
@@ -38,8 +38,3 @@ class RayPool:
     def close(self) -> None:
         for actor in self.actors:
             self._ray.kill(actor)  # type: ignore[arg-type]
-
-
-def ray_get_one(ray: Any, actor: Any, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
-    """One actor: the whole batch in one call (groups only help to balance several)."""
-    return list(ray.get(actor.simulate.remote(list(requests))))

@@ -6,6 +6,7 @@ from pathlib import Path
 import click
 
 from bilba_dist.cli.main import user_errors
+from bilba_dist.errors import BilbaError
 
 #: Exit code when the driver was interrupted (jobs recorded so far are kept).
 EXIT_INTERRUPTED = 130
@@ -38,8 +39,6 @@ def batch(
     from schedulers.jobs import load_jobs
 
     if workers < 1:
-        from bilba_dist.errors import BilbaError
-
         raise BilbaError("--workers: a batch needs at least 1")
     grid = load_jobs(jobs_file)
     out = out or Path("batches") / grid.name

@@ -6,6 +6,9 @@ from pathlib import Path
 import click
 
 from bilba_dist.cli.main import user_errors
+from bilba_dist.errors import BilbaError
+from bilba_dist.record import inspect
+from bilba_dist.record.inspect import mode_text
 from bilba_dist.record.reader import read_log, recover
 
 
@@ -41,12 +44,7 @@ def summary(files: tuple[Path, ...]) -> None:
         )
         if len(files) == 1:
             for k, s in enumerate(log.json("/schedule")):
-                click.echo(
-                    f"  schedule {k}: "
-                    + " -> ".join(
-                        f"({e}, {m})" if e != "free" else "free" for e, m in s["schedule"]
-                    )
-                )
+                click.echo(f"  schedule {k}: " + " -> ".join(map(mode_text, s["schedule"])))
 
 
 @logs.command("plan")
@@ -59,8 +57,6 @@ def plan_command(file: Path, out: Path | None) -> None:
     """The plan recorded in a log: byte for byte the planner's plan file."""
     log = read_log(file)
     if not log.messages.get("/plan"):
-        from bilba_dist.errors import BilbaError
-
         raise BilbaError(f"{file}: the log holds no plan (the job did not finish)")
     data = log.messages["/plan"][-1]
     if out is None:
@@ -90,9 +86,7 @@ def recover_command(file: Path, out: Path | None) -> None:
 @user_errors
 def show(file: Path, step: int) -> None:
     """The particles, contacts and motion of one transition."""
-    from bilba_dist.record.inspect import show as describe
-
-    click.echo(describe(read_log(file), step))
+    click.echo(inspect.show(read_log(file), step))
 
 
 @logs.command()
@@ -101,10 +95,8 @@ def show(file: Path, step: int) -> None:
 @user_errors
 def plot(file: Path, out: Path | None) -> None:
     """PNG: score and particle spread per transition, and the schedules as they evolved."""
-    from bilba_dist.record.inspect import plot as draw
-
     out = out or file.with_suffix(".png")
-    draw(read_log(file), out)
+    inspect.plot(read_log(file), out)
     click.echo(f"{out}")
 
 
@@ -117,9 +109,7 @@ def plot(file: Path, out: Path | None) -> None:
 @user_errors
 def export(file: Path, fmt: str, out: Path | None) -> None:
     """Every message as JSON lines, or one CSV row per transition and particle."""
-    from bilba_dist.record.inspect import export as flatten
-
-    text = flatten(read_log(file), fmt)
+    text = inspect.export(read_log(file), fmt)
     if out is None:
         click.echo(text, nl=False)
     else:

@@ -158,26 +158,25 @@ def _finish(
     """The motions from the root to ``leaf`` are the plan."""
     from bilba_dist.planning.bilba import planned_motions
 
-    path: list[int] = []
-    k: int | None = leaf
-    while k is not None and nodes[k].parent is not None:
-        path.append(k)
-        k = nodes[k].parent
-    path.reverse()
+    goal = frozenset([task.goal])
+    edges: list[tuple[int, int]] = []  # (parent, child), leaf first
+    k = leaf
+    while (parent := nodes[k].parent) is not None:
+        edges.append((parent, k))
+        k = parent
     steps = []
-    for k in path:
-        node, parent = nodes[k], nodes[nodes[k].parent]  # type: ignore[index]
-        motion = node.motion
-        assert motion is not None
-        score = node.belief.score(frozenset([task.goal]))
-        steps.append(Step(motion, task.goal, score))
+    for parent, child in reversed(edges):
+        node = nodes[child]
+        assert node.motion is not None
+        score = node.belief.score(goal)
+        steps.append(Step(node.motion, task.goal, score))
         recorder.transition(
             task.goal,
-            motion,
-            parent.belief,
+            node.motion,
+            nodes[parent].belief,
             node.belief,
             score,
-            node.belief.count(frozenset([task.goal])),
+            node.belief.count(goal),
             True,
         )
     result.success, result.reason = True, ""

@@ -12,12 +12,13 @@ from bilba_dist.errors import BilbaError
 from bilba_dist.record.reader import Log
 
 
-def _mode(pair: list[str]) -> str:
+def mode_text(pair: list[str]) -> str:
+    """A logged contact pair as text: ``(env, manip)``, or ``free``."""
     return "free" if pair[0] == "free" else f"({pair[0]}, {pair[1]})"
 
 
 def _contacts(contacts: list[list[str]]) -> str:
-    return ", ".join(_mode(c) for c in contacts) or "free"
+    return ", ".join(mode_text(c) for c in contacts) or "free"
 
 
 def transition(log: Log, step: int) -> dict[str, Any]:
@@ -39,7 +40,7 @@ def show(log: Log, step: int) -> str:
     K = np.asarray(motion["K"])
     lines = [
         f"step {t['index']} of {total}: {'ACCEPTED' if t['accepted'] else 'rejected'}, "
-        f"contact sought {_mode(t['contact_sought'])}",
+        f"contact sought {mode_text(t['contact_sought'])}",
         f"motion   G_d xyz [{' '.join(f'{v:+.4f}' for v in motion['G_d']['xyz'])}] m, "
         f"quat xyzw [{' '.join(f'{v:+.4f}' for v in motion['G_d']['quat_xyzw'])}], "
         f"timeout {motion['timeout_s']:g} s",
@@ -76,7 +77,7 @@ def plot(log: Log, out: Path) -> None:
     accepted = np.array([t["accepted"] for t in transitions])
     scores = np.array([t["score"] for t in transitions])
     spread = np.array([spread_mm(t["after"]) for t in transitions])
-    sought = [_mode(t["contact_sought"]) for t in transitions]
+    sought = [mode_text(t["contact_sought"]) for t in transitions]
     modes = list(dict.fromkeys(sought))
     # Where each new schedule starts, counted in transitions written before it.
     schedule_at, count = [], 0
@@ -134,7 +135,7 @@ def export(log: Log, fmt: str) -> str:
                 [
                     t["index"],
                     int(t["accepted"]),
-                    _mode(t["contact_sought"]),
+                    mode_text(t["contact_sought"]),
                     t["score"],
                     t["count"],
                     i,

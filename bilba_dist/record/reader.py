@@ -3,6 +3,7 @@
 import json
 from collections import defaultdict
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -19,9 +20,16 @@ MAGIC = b"\x89MCAP0\r\n"
 @dataclass
 class Log:
     path: Path
-    messages: dict[str, list[bytes]] = field(default_factory=lambda: defaultdict(list))
     #: Every message in file order: (topic, log time [ns], data).
     records: list[tuple[str, int, bytes]] = field(default_factory=list)
+
+    @cached_property
+    def messages(self) -> dict[str, list[bytes]]:
+        """The messages by topic, in file order (a topic with none: an empty list)."""
+        by_topic: dict[str, list[bytes]] = defaultdict(list)
+        for topic, _, data in self.records:
+            by_topic[topic].append(data)
+        return by_topic
 
     def json(self, topic: str) -> list[dict[str, Any]]:
         return [json.loads(data) for data in self.messages.get(topic, [])]
@@ -51,7 +59,6 @@ def read_log(path: Path) -> Log:
     try:
         with path.open("rb") as f:
             for _, channel, message in make_reader(f, validate_crcs=True).iter_messages():
-                log.messages[channel.topic].append(message.data)
                 log.records.append((channel.topic, message.log_time, message.data))
     except (McapError, ValueError, EOFError, KeyError, OSError) as exc:
         raise BilbaError(

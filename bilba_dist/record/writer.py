@@ -76,7 +76,6 @@ class LogWriter:
             for topic, schema in {**TOPICS, **FOXGLOVE_SCHEMAS}.items()
         }
         self._scene = SceneMessages(task.manipuland, task.environment)
-        self._scene_started = False
         self._sequence = 0
         self.transitions = 0
         header = {
@@ -122,9 +121,8 @@ class LogWriter:
         count: int,
         accepted: bool,
     ) -> None:
-        if not self._scene_started:
-            self._scene_started = True
-            self.draw(before)
+        if self.transitions == 0:
+            self.draw(before)  # the start belief
         self.write(
             "/transition",
             {
