@@ -63,6 +63,17 @@ def test_a_bad_jobs_file_is_one_line_and_exit_2_before_ray_starts(text, message,
     assert not (tmp_path / "out").exists()
 
 
+def test_a_batch_without_workers_or_a_report_without_records_is_one_line_and_exit_2(tmp_path):
+    result = run("batch", str(SMOKE), "--workers", "0", "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2 and "--workers: a batch needs at least 1" in result.stderr
+    assert not (tmp_path / "out").exists()
+    (tmp_path / "empty").mkdir()
+    (tmp_path / "empty" / RECORDS).write_text("")
+    result = run("report", str(tmp_path / "empty"))
+    assert result.exit_code == 2 and "no job records yet" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
 def test_the_paper_grid_expands_to_30_distinct_jobs():
     batch = load_jobs(ROOT / "deploy" / "jobs" / "paper.yaml")
     assert len(batch.jobs) == 30 and len({j.id for j in batch.jobs}) == 30

@@ -122,7 +122,13 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
     elif case == "truncated":
         data = planned[1].read_bytes()
         path.write_bytes(data[: len(data) // 2])
-    for command in (["logs", "summary"], ["logs", "plan"], ["logs", "show"], ["logs", "plot"]):
+    for command in (
+        ["logs", "summary"],
+        ["logs", "plan"],
+        ["logs", "show"],
+        ["logs", "plot"],
+        ["logs", "export"],
+    ):
         result = run(*command, str(path))
         assert result.exit_code == 2, (case, result.output)
         lines = result.stderr.strip().splitlines()
