@@ -2,9 +2,11 @@
 
     .venv/bin/python benchmarks/planning.py [--seeds 5] [--workers 2] [--timeout 300]
         [--settings peg-pitch peg-x peg-y puzzle-x] [--planners bilba-variable bilba-fixed b-est]
+        [--model panda|floating]
 
 Each plan runs on a pool of Ray rollout actors (local, --workers CPUs) started once per
-setting; the time quoted is the planner's own (Ray and actor start-up excluded). Prints a
+setting; the time quoted is the planner's own (Ray and actor start-up excluded), including,
+with `--model floating`, the replay that validates each plan on the Panda. Prints a
 table of median ± MAD per cell and ends with one JSON line (times in keys ending `_s`).
 Targets (issue 4, this 2-core machine): peg-in-hole median ≤ 10 s, puzzle ≤ 60 s, all
 successful.
@@ -21,6 +23,7 @@ from bilba_dist.planning.bilba import PLANNERS, plan
 from bilba_dist.task.loader import load_task
 from schedulers.session import ray_session
 from workers.pool import RayPool
+from workers.rollout_worker import RolloutWorker
 
 SETTINGS = {
     "peg-pitch": ("peg-in-hole", "grasp.pitch=2deg"),
@@ -47,17 +50,26 @@ def main() -> None:
         default=["bilba-variable", "bilba-fixed"],  # b-est (minutes per run) only when asked
         choices=list(PLANNERS),
     )
+    parser.add_argument("--model", choices=["panda", "floating"], default="panda")
     args = parser.parse_args()
     rows = {}
     with ray_session(args.workers, None):
         for setting in args.settings:
             name, bound = SETTINGS[setting]
             task = load_task(name, [bound])
-            pool = RayPool(task, args.workers)
+            pool = RayPool(task, args.workers, args.model)
+            panda = RolloutWorker(task, "panda") if args.model == "floating" else None
             for planner in args.planners:
                 runs = []
                 for seed in range(args.seeds):
-                    r = plan(task, pool, planner, seed, args.timeout)  # type: ignore[arg-type]
+                    r = plan(
+                        task,
+                        pool,
+                        planner,  # type: ignore[arg-type]
+                        seed,
+                        args.timeout,
+                        validate_on=panda,
+                    )
                     runs.append(r)
                     print(
                         f"  {setting} {planner} seed {seed}: {r.success} "
@@ -76,7 +88,8 @@ def main() -> None:
             pool.close()
     print(
         f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
-        f"{args.workers} Ray workers; {args.seeds} seeds; timeout {args.timeout:g} s"
+        f"{args.workers} Ray workers; {args.seeds} seeds; timeout {args.timeout:g} s; "
+        f"{args.model} model"
     )
     print(
         f"{'setting':<10} {'planner':<15} {'median s':>9} {'MAD s':>7} {'success':>8} "
@@ -92,7 +105,7 @@ def main() -> None:
         for (setting, planner), r in rows.items()
         for key, value in r.items()
     }
-    print(json.dumps(figures, sort_keys=True))
+    print(json.dumps({**figures, "model": args.model}, sort_keys=True))
 
 
 if __name__ == "__main__":

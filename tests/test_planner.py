@@ -185,3 +185,25 @@ def test_a_plan_that_fails_on_the_panda_is_not_returned(pitch_plan):
     _validate(task, broken, start_belief(task, initial_belief(task)), panda)
     assert not broken.success
     assert "failed validation on the Panda model" in broken.reason
+
+
+def test_sample_patience_stops_scoring_when_nothing_improves(peg):
+    """Setpoints in free space above the start never reach the goal: with patience 16 the
+    evaluator gives up after two chunks of 8 (screening rollouts only), without it screens
+    all 40."""
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.planning.evaluate import Candidate, Evaluator
+    from bilba_dist.rollout import Motion
+
+    belief = start_belief(peg, initial_belief(peg))
+    lifts = [peg.X_WG0 * pin.SE3(np.eye(3), np.array([0, 0, -0.002 * k])) for k in range(40)]
+    candidates = [Candidate(Motion(VERY_STIFF, G_d, 1.0), k % 3) for k, G_d in enumerate(lifts)]
+    worker = RolloutWorker(peg, "floating")
+    for patience, rollouts in ((16, 16), (0, 40)):
+        evaluator = Evaluator(worker)
+        scored, winner = evaluator.score(
+            belief, candidates, frozenset({peg.goal}), patience=patience
+        )
+        assert winner is None and all(s.count == 0 for s in scored)
+        assert evaluator.rollouts == rollouts
+    worker.close()

@@ -84,7 +84,10 @@ def plan(
         cache=SliceCache(task),
         stiffness=_stiffness_rule(task, variant),
         setpoints=SetpointParams(
-            params.setpoints_per_particle, params.noisy_setpoints, params.setpoint_noise_m
+            params.setpoints_per_particle,
+            params.noisy_setpoints,
+            params.setpoint_noise_m,
+            patience=params.sample_patience,
         ),
         gp=GPParams(
             params.gp_test_points,

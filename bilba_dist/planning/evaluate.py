@@ -49,9 +49,13 @@ class Evaluator:
         candidates: Sequence[Candidate],
         accept: Accept,
         on_scored: Callable[[Scored], None] = lambda scored: None,
+        patience: int = 0,
     ) -> tuple[list[Scored], Scored | None]:
-        """Score every candidate (screened); stop at the first that gets all into ``accept``."""
+        """Score the candidates (screened) in order; stop at the first chunk with one that
+        gets all into ``accept``, or, with ``patience`` > 0, once that many candidates in a
+        row (counted per chunk) have not raised the best score."""
         scored: list[Scored] = []
+        best, idle = 0.0, 0
         for start in range(0, len(candidates), self.chunk):
             batch = candidates[start : start + self.chunk]
             chunk_scored = self._score_chunk(belief, batch, accept)
@@ -62,6 +66,10 @@ class Evaluator:
             winners = [s for s in chunk_scored if s.count == len(belief)]
             if winners:
                 return scored, max(winners, key=lambda s: s.score)
+            top = max(s.score for s in chunk_scored)
+            best, idle = (top, 0) if top > best else (best, idle + len(batch))
+            if patience and idle >= patience:
+                break
         return scored, None
 
     def _score_chunk(

@@ -116,7 +116,9 @@ def best_motion(
             mode, s.candidate.motion, belief, s.posterior, s.score, s.count, False
         )
 
-    scored, winner = search.evaluator.score(belief, candidates, accept, record)
+    scored, winner = search.evaluator.score(
+        belief, candidates, accept, record, search.setpoints.patience
+    )
     best = winner or best_of(scored)
     _report(search, mode, best)
     idle = 0  # GP rounds in a row without a better score

@@ -20,6 +20,7 @@ class SetpointParams:
     noise_m: float = 0.01  # ± per axis [m]
     press_m: float = 0.003  # surface samples are pushed inside by up to this [m]: a setpoint
     # exactly on the surface makes the contact with zero force, which the sim may or may not see
+    patience: int = 0  # stop scoring samples after this many in a row without a better score
 
 
 def sample_setpoints(
