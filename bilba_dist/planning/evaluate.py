@@ -3,7 +3,8 @@
 A candidate made for one particle is first run on that particle alone; only if it reaches the
 contact there is it run on the others. Candidates go in chunks, and the search stops at the
 first motion that brings every particle into the contact (paper: "if any of the motions ...
-achieve the current desired contact for every particle").
+achieve the current desired contact for every particle") or, with a patience, once that many
+candidates in a row have not raised the best score.
 """
 
 from collections.abc import Callable, Sequence

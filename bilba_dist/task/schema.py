@@ -126,8 +126,8 @@ class PlannerParams(Strict):
     setpoint_noise_m: float = Field(default=0.01, ge=0)
     # Stop scoring sampled setpoints once this many in a row bring no better score, and go
     # on to the GP rounds (ours; 0, the default, scores every sample, as the authors do).
-    # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); on the puzzle 16
-    # pruned edges that full sampling makes, so it keeps 0 (README, Benchmarks).
+    # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); the puzzle keeps 0
+    # until enough runs choose (README, Benchmarks).
     sample_patience: int = Field(default=0, ge=0)
     gp_test_points: int = Field(default=1000, ge=1)
     gp_noise: float = Field(default=0.02, ge=0)
