@@ -16,16 +16,18 @@ import pinocchio as pin
 
 from bilba_dist.geometry.piece import Part
 
-_VEC3 = {
-    "type": "object",
-    "properties": {k: {"type": "number"} for k in "xyz"},
-    "required": ["x", "y", "z"],
-}
-_QUAT = {
-    "type": "object",
-    "properties": {k: {"type": "number"} for k in "xyzw"},
-    "required": ["x", "y", "z", "w"],
-}
+
+def _numbers(keys: str) -> dict[str, Any]:
+    """An object of required numbers, one per letter of ``keys`` (vector, quaternion, colour)."""
+    return {
+        "type": "object",
+        "properties": {k: {"type": "number"} for k in keys},
+        "required": list(keys),
+    }
+
+
+_VEC3 = _numbers("xyz")
+_QUAT = _numbers("xyzw")
 _TIME = {
     "type": "object",
     "properties": {
@@ -34,11 +36,7 @@ _TIME = {
     },
     "required": ["sec", "nsec"],
 }
-_COLOR = {
-    "type": "object",
-    "properties": {k: {"type": "number"} for k in "rgba"},
-    "required": ["r", "g", "b", "a"],
-}
+_COLOR = _numbers("rgba")
 _POSE = {
     "type": "object",
     "properties": {"position": _VEC3, "orientation": _QUAT},
