@@ -78,6 +78,10 @@ BAD_FILES = {
         r"unknown uncertainty axis 'grasp\.w'",
     ),
     "wrong type": (lambda d: _set(d, "slippery", "friction"), r"friction: .*number"),
+    "negative planner patience": (
+        lambda d: _set(d, -1, "planner", "sample_patience"),
+        r":\d+: planner\.sample_patience: .*greater than or equal to 0",
+    ),
     "non-convex piece": (
         lambda d: d["environment"]["pieces"][1]["convex"]["vertices"].append([0.05, 0.0, 0.05]),
         r"piece 'wall_px' is not convex",
