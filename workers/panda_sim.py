@@ -31,9 +31,12 @@ class JointImpedance:
     ``N`` the null-space projector of J there (the posture term: the redundant arm does not
     drift). The spring wrench ``K J (q_ref − q)`` is clipped in norm before mapping back.
 
-    One 13×14 product per step gives both the wrench (to test the clip) and the torque."""
+    Per step one 13×14 product of ``[[−K J, 0], [−K_q, −B_q]]`` with ``[q; q̇]``, plus the
+    reference's share ``[K J; K_q] q_ref`` computed for the whole ramp at once, gives both
+    the wrench (to test the clip) and the torque."""
 
-    gains: np.ndarray  # [[K J, 0], [K_q, -B_q]] acting on [e; q̇]
+    state_gains: np.ndarray  # [[-K J, 0], [-K_q, -B_q]] acting on [q; q̇], 13×14
+    ref_gains: np.ndarray  # [K J; K_q] acting on q_ref, 13×7
     Jt: np.ndarray  # Jᵀ, 7×6
     K_null: np.ndarray  # k_n N, 7×7
     B_q: np.ndarray  # Jᵀ B J + d_n N, 7×7
@@ -47,20 +50,16 @@ class JointImpedance:
         N = np.eye(7) - J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), J)
         KJ, K_null = K @ J, s.null_stiffness * N
         B_q = J.T @ damping(K) @ J + s.null_damping * N
-        gains = np.block([[KJ, np.zeros((6, 7))], [J.T @ KJ + K_null, -B_q]])
-        return cls(gains, J.T.copy(), K_null, B_q, s.spring_limit)
+        ref_gains = np.vstack([KJ, J.T @ KJ + K_null])
+        state_gains = np.hstack([-ref_gains, np.vstack([np.zeros((6, 7)), -B_q])])
+        return cls(state_gains, ref_gains, J.T.copy(), K_null, B_q, s.spring_limit)
 
-    def torque(self, state: np.ndarray, g: np.ndarray) -> np.ndarray:
-        """``τ = Jᵀ clip(K J e) + k_n N e − B_q q̇ + g`` for ``state = [e; q̇]``, within the
-        torque limits."""
-        out = self.gains @ state
-        wrench, tau = out[:6], out[6:]
-        norm = math.sqrt(wrench @ wrench)
-        if norm > self.limit:  # rare: only far from the setpoint
-            error, dq = state[:7], state[7:]
-            wrench *= self.limit / norm
-            tau = self.Jt @ wrench + self.K_null @ error - self.B_q @ dq
-        return np.minimum(np.maximum(tau + g, -TORQUE_LIMITS), TORQUE_LIMITS)
+    def clipped(self, q_ref: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``Jᵀ clip(K J e) + k_n N e − B_q q̇`` for ``x = [q; q̇]``, ``e = q_ref − q``: the
+        rare step far from the setpoint, where the spring wrench is over its limit."""
+        wrench = self.ref_gains[:6] @ (q_ref - x[:7])
+        wrench *= self.limit / math.sqrt(wrench @ wrench)
+        return self.Jt @ wrench + self.K_null @ (q_ref - x[:7]) - self.B_q @ x[7:]
 
 
 class PandaSim:
@@ -134,33 +133,47 @@ class PandaSim:
         return self._result(X_WO, q_d, steps * self.settings.timestep_s, settled, True)
 
     def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool]:
+        """Step the controller until the motion has settled or timed out.
+
+        The per-step Python is half of a step's time, so the loop keeps to preallocated
+        arrays and few numpy calls (issue 3's overhead figure; benchmarks/rollouts.py)."""
         s, client, robot, joints = self.settings, self.client, self.robot, self.joints
         gains = JointImpedance.at(self.model, q_d, motion.K, s)
         n_ramp = ramp_steps(self.model.fk(q0), motion.G_d, s)
         ramp = q0 + np.minimum(1.0, np.arange(1, n_ramp + 1) / n_ramp)[:, None] * (q_d - q0)
+        feed = ramp @ gains.ref_gains.T  # the reference's share of [wrench; τ], per step
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
+        read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
-        still, physics, calm = 0, 0.0, s.settle_joint_speed
-        q, state = np.empty(7), np.empty(14)  # state = [q_ref - q; q̇]
+        dot, add, low, high = np.dot, np.add, np.maximum, np.minimum
+        G, limit2, last = gains.state_gains, s.spring_limit**2, n_ramp - 1
+        tau_min, tau_max = -TORQUE_LIMITS, TORQUE_LIMITS
+        still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
+        x, out, tau = np.empty(14), np.empty(13), np.empty(7)  # x = [q; q̇]
+        q, wrench, spring = x[:7], out[:6], out[6:]
         for k in range(n_max):
-            states = p.getJointStates(robot, joints, physicsClientId=client)
-            q[:] = [st[0] for st in states]
-            state[7:] = [st[1] for st in states]
-            state[:7] = ramp[min(k, n_ramp - 1)] - q
-            tau = gains.torque(state, gravity(model, data, q))
-            p.setJointMotorControlArray(
-                robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client
-            )
+            states = read(robot, joints, physicsClientId=client)
+            x[:] = [st[0] for st in states] + [st[1] for st in states]
+            i = k if k < last else last
+            add(dot(G, x, out=out), feed[i], out=out)
+            if dot(wrench, wrench) > limit2:  # rare: only far from the setpoint
+                spring[:] = gains.clipped(ramp[i], x)
+            add(spring, gravity(model, data, q), out=tau)
+            high(low(tau, tau_min, out=tau), tau_max, out=tau)
+            command(robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client)
             t0 = timer()
             step(physicsClientId=client)
             physics += timer() - t0
-            if s.early_stop and k + 1 >= n_ramp:
-                still = still + 1 if np.abs(state[7:]).max() < calm else 0
-                if still >= n_window:
-                    self.stats.add(k + 1, physics)
-                    return k + 1, True
+            if watch and k >= last:
+                if all(-calm < st[1] < calm for st in states):
+                    still += 1
+                    if still >= n_window:
+                        self.stats.add(k + 1, physics)
+                        return k + 1, True
+                else:
+                    still = 0
         self.stats.add(n_max, physics)
         return n_max, False
 
