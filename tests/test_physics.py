@@ -74,6 +74,25 @@ def test_peg_pressed_onto_a_flat_face_reports_exactly_that_pair():
         worker.close()
 
 
+def test_spring_wrench_is_clipped_when_pressing_deep():
+    """A setpoint 10 cm inside a flat face stretches the 600 N/m spring by ~10 cm: the arm
+    pushes with the 20 N norm limit, not ~60 N (the limit's branch of the control loop)."""
+    task = load_task(FLAT)
+    (particle,) = initial_belief(task)
+    deep = moved(task.X_WG0, xyz=(0, 0, -0.21))
+    forces = {}
+    for limit in (20.0, 1000.0):
+        worker = RolloutWorker(task, "panda", SimSettings(spring_limit=limit))
+        result = run(worker, task, particle, deep)
+        assert result.contacts == {ContactPair("block/+z", "peg/-z")}
+        sim = worker.panda_sim(particle.X_GM)
+        points = p.getContactPoints(bodyA=sim.robot, physicsClientId=sim.client)
+        forces[limit] = sum(pt[9] for pt in points)
+        worker.close()
+    assert forces[20.0] == pytest.approx(20.0, abs=1.5)
+    assert forces[1000.0] > 45.0
+
+
 def test_ramped_motion_into_the_hole_reaches_the_bottom(worker, nominal_peg):
     task, particle = nominal_peg
     down = moved(task.X_WG0, xyz=(0, 0, -0.135))  # 5 mm below the hole bottom
