@@ -114,6 +114,22 @@ def test_failed_search_says_why(peg):
     worker.close()
 
 
+def test_running_out_of_attempts_says_so():
+    """One candidate per particle and no GP: MakeContact fails, its edge is pruned, and after
+    n_attempts the reason names the attempts (not an empty graph), with the last failure."""
+    from bilba_dist.task.loader import build_task
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    cheap = {"n_attempts": 2, "setpoints_per_particle": 1, "noisy_setpoints": 0, "gp_rounds": 0}
+    spec = task.spec.model_copy(update={"planner": task.spec.planner.model_copy(update=cheap)})
+    worker = RolloutWorker(spec, "panda")
+    result = plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0)
+    worker.close()
+    assert not result.success
+    assert result.attempts == 2 and len(result.pruned) == 2
+    assert result.reason.startswith("all 2 attempts failed (2 edges pruned); last: no motion")
+
+
 def test_start_state_puts_the_gripper_at_the_start_pose(peg):
     from bilba_dist.robot.panda import PandaModel
 

@@ -107,7 +107,12 @@ def plan(
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         _attempts(task, graph, b0, search, rng, result, panda)
     except NoScheduleError as exc:
-        result.reason = f"no contact schedule: {exc}"
+        result.reason = (
+            f"edges pruned until no schedule was left ({len(result.pruned)} pruned); "
+            f"last: {result.reason}"
+            if result.pruned
+            else f"no contact schedule: {exc}"
+        )
     except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
     if result.success and validate_on is not None:
@@ -154,7 +159,7 @@ def _attempts(
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))
                 search.recorder.pruned((mode, target), outcome.reason)
-                result.reason = f"edges pruned until no schedule was left; last: {outcome.reason}"
+                result.reason = outcome.reason
                 break
             steps += outcome.steps
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
@@ -164,6 +169,10 @@ def _attempts(
                 result.final_belief = belief
                 return
             graph.reweight(_positions(belief))
+    result.reason = (
+        f"all {result.attempts} attempts failed ({len(result.pruned)} edges pruned); "
+        f"last: {result.reason}"
+    )
 
 
 def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
