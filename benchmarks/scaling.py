@@ -4,8 +4,10 @@ and a batch grid on 1 and 2 CPUs.
     .venv/bin/python benchmarks/scaling.py [--seeds 5] [--settings peg-pitch peg-x]
         [--jobs-seeds 3]
 
-One plan per setting (bilba-variable): the same seeds in-process, on a RayPool of 1 and of 2
-actors (one local Ray instance with 2 CPUs; planner time, actor start-up excluded). A seeded
+One plan per setting (bilba-variable): each seed in-process, on 1 actor and on 2 (one local
+Ray instance with 2 CPUs; the 1-actor pool is the first actor of the 2-actor one), back to
+back, so that each ratio compares the same moment of a shared machine; planner time, actor
+start-up excluded. A seeded
 plan is the same on every backend, so each per-seed ratio compares the same rollouts; the
 median of those is quoted. peg-pitch plans are small (~70 rollouts in ~10 batches of a few
 each); peg-x plans (~400-600 rollouts) are the load scaling is for, and give the headline
@@ -34,20 +36,21 @@ SETTINGS = {"peg-pitch": "grasp.pitch=2deg", "peg-x": "grasp.x=1cm"}
 
 
 def one_plan(bound: str, seeds: int) -> dict[str, list[float]]:
+    """Per seed, the plan in-process, on 1 actor and on 2, back to back: the VM's load drifts
+    over minutes, and interleaving gives each ratio the same moment."""
     task = load_task("peg-in-hole", [bound])
     times: dict[str, list[float]] = {"in-process": [], "1 actor": [], "2 actors": []}
     local = RolloutWorker(task, "panda")
-    plan(task, local, seed=99)  # warm: worlds built, imports done
-    for seed in range(seeds):
-        times["in-process"].append(plan(task, local, seed=seed).planning_time_s)
     with ray_session(2, None):
-        # One pool at a time: the instance has 2 CPUs and each actor holds one.
-        for name, actors in (("1 actor", 1), ("2 actors", 2)):
-            pool = RayPool(task, actors)
-            plan(task, pool, seed=99)
-            for seed in range(seeds):
-                times[name].append(plan(task, pool, seed=seed).planning_time_s)
-            pool.close()
+        two = RayPool(task, 2)  # one instance with 2 CPUs: the 1-actor pool is its first
+        backends = {"in-process": local, "1 actor": two.first(1), "2 actors": two}
+        for backend in backends.values():
+            plan(task, backend, seed=99)  # warm: worlds built, imports done
+        for seed in range(seeds):
+            for name, backend in backends.items():
+                times[name].append(plan(task, backend, seed=seed).planning_time_s)
+        two.close()
+    local.close()
     return times
 
 

@@ -47,6 +47,24 @@ def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_
             assert np.array_equal(a.K, b.K)
 
 
+def test_a_pool_on_the_first_actor_shares_it_and_closing_it_kills_nothing(local_ray):
+    from workers.pool import RayPool
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    requests = fixed_motion_set(task, 4, seed=6)
+    pool = RayPool(task, 2)
+    one = pool.first(1)
+    assert one.actors == pool.actors[:1]
+    pid = ray.get(pool.actors[0].pid.remote())
+    on_one = one.simulate(requests)
+    one.close()
+    assert ray.get(pool.actors[0].pid.remote()) == pid  # still the same live process
+    on_two = pool.simulate(requests)
+    pool.close()
+    for a, b in zip(on_one, on_two, strict=True):
+        assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
+
+
 def test_killing_a_worker_process_mid_plan_still_gives_the_same_plan(local_ray):
     """The actor restarts (re-running its constructor) and its lost rollouts are retried."""
     import os

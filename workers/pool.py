@@ -17,18 +17,29 @@ class RayPool:
 
     def __init__(self, task: Task, workers: int, model: DynamicsModel = "panda") -> None:
         import ray
+
+        actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(RolloutWorker)
+        self._use([actor.remote(task.spec, model) for _ in range(workers)], owner=True)
+
+    def _use(self, actors: list, owner: bool) -> None:
+        import ray
         from ray.util import ActorPool
 
-        self._ray = ray
-        actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(RolloutWorker)
-        self.actors = [actor.remote(task.spec, model) for _ in range(workers)]
-        self._pool = ActorPool(self.actors)
+        self._ray, self.actors, self._owner = ray, actors, owner
+        self._pool = ActorPool(actors)
+
+    def first(self, workers: int) -> "RayPool":
+        """A pool on this pool's first ``workers`` actors (already started and warm), for
+        comparing pool sizes back to back on one Ray instance; closing it kills nothing."""
+        pool = object.__new__(RayPool)
+        pool._use(self.actors[:workers], owner=False)
+        return pool
 
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
         if not requests:
             return []
         if len(self.actors) == 1:  # one call: groups only help to balance several actors
-            ref = self.actors[0].simulate.remote(list(requests))  # type: ignore[attr-defined]
+            ref = self.actors[0].simulate.remote(list(requests))
             return list(self._ray.get(ref))
         size = max(1, len(requests) // (4 * len(self.actors)))  # ~4 groups per actor
         groups = [list(requests[i : i + size]) for i in range(0, len(requests), size)]
@@ -36,5 +47,5 @@ class RayPool:
         return [r for group in done for r in group]
 
     def close(self) -> None:
-        for actor in self.actors:
-            self._ray.kill(actor)  # type: ignore[arg-type]
+        for actor in self.actors if self._owner else []:
+            self._ray.kill(actor)
