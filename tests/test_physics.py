@@ -93,6 +93,31 @@ def test_spring_wrench_is_clipped_when_pressing_deep():
     assert forces[1000.0] > 45.0
 
 
+def test_cartesian_ramp_keeps_the_hand_on_the_straight_line(nominal_peg):
+    """A straight joint ramp bows the hand ~2 mm off an 8 cm descent; the IK-waypoint ramp
+    stays within 0.05 mm, and both end at the joint setpoint."""
+    from bilba_dist.robot.panda import Q_CENTRE
+    from workers.motion import ramp_steps
+
+    task, particle = nominal_peg
+    X0 = task.X_WG0
+    X1 = moved(X0, xyz=(0.03, 0, -0.08))
+    off_line = {}
+    for cartesian in (False, True):
+        worker = RolloutWorker(task, "panda", SimSettings(cartesian_ramp=cartesian))
+        sim = worker.panda_sim(particle.X_GM)
+        q0 = sim.model.ik(X0, Q_CENTRE)
+        q1 = sim.model.ik(X1, q0)
+        ramp = sim._ramp(q0, q1, X1, ramp_steps(X0, X1, sim.settings))
+        assert np.allclose(ramp[-1], q1, rtol=0, atol=1e-12)
+        u = (X1.translation - X0.translation) / np.linalg.norm(X1.translation - X0.translation)
+        offsets = [sim.model.fk(q).translation - X0.translation for q in ramp]
+        off_line[cartesian] = max(np.linalg.norm(d - (d @ u) * u) for d in offsets)
+        worker.close()
+    assert off_line[False] > 1e-3
+    assert off_line[True] < 5e-5
+
+
 def test_ramped_motion_into_the_hole_reaches_the_bottom(worker, nominal_peg):
     task, particle = nominal_peg
     down = moved(task.X_WG0, xyz=(0, 0, -0.135))  # 5 mm below the hole bottom

@@ -18,7 +18,7 @@ import pybullet as p
 from bilba_dist.geometry.piece import Part
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.motion import SimStats, damping, label_final_contacts, ramp_steps
+from workers.motion import SimStats, damping, label_final_contacts, ramp_poses, ramp_steps
 from workers.scene import EnvironmentBodies, connect, quat_xyzw
 from workers.settings import SimSettings
 from workers.urdf import write_obj
@@ -168,11 +168,3 @@ class FloatingSim:
                     return k + 1, True
         self.stats.add(n_max, physics)
         return n_max, False
-
-
-def ramp_poses(X_start: pin.SE3, X_goal: pin.SE3, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The setpoint at each of ``n`` ramp steps, along the SE(3) geodesic: (n, 3, 3)
-    rotations and (n, 3) positions, ending at ``X_goal``."""
-    delta = pin.log6(X_start.actInv(X_goal)).vector
-    poses = [X_start * pin.exp6((k + 1) / n * delta) for k in range(n)]
-    return np.array([X.rotation for X in poses]), np.array([X.translation for X in poses])

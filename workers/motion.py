@@ -68,3 +68,11 @@ def label_final_contacts(
             X_WO.rotation.T @ X_WM.rotation,
         )
     return frozenset(contacts)
+
+
+def ramp_poses(X_start: pin.SE3, X_goal: pin.SE3, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The setpoint at each of ``n`` ramp steps, along the SE(3) geodesic: (n, 3, 3)
+    rotations and (n, 3) positions, ending at ``X_goal``."""
+    delta = pin.log6(X_start.actInv(X_goal)).vector
+    poses = [X_start * pin.exp6((k + 1) / n * delta) for k in range(n)]
+    return np.array([X.rotation for X in poses]), np.array([X.translation for X in poses])

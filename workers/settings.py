@@ -12,6 +12,8 @@ class SimSettings:
     ramp_speed_m_s: float = 0.1  # setpoint ramp: translation speed ...
     ramp_speed_rad_s: float = 0.5  # ... and rotation speed; the slower one sets the time
     min_ramp_s: float = 0.2
+    cartesian_ramp: bool = False  # Panda: reference through IK waypoints on the hand's
+    ramp_waypoint_steps: int = 8  # straight line (SE(3) geodesic), one every N steps
     settle_window_s: float = 0.25  # stop once still this long after the ramp ends
     settle_joint_speed: float = 2e-3  # "still" for the Panda: every |dq| below [rad/s]
     settle_speed_m_s: float = 1e-3  # "still" for the floating part [m/s] ...
