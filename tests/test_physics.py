@@ -118,6 +118,19 @@ def test_cartesian_ramp_keeps_the_hand_on_the_straight_line(nominal_peg):
     assert off_line[True] < 5e-5
 
 
+def test_task_file_switches_the_cartesian_ramp_on(nominal_peg):
+    task, particle = nominal_peg
+    planner = task.spec.planner.model_copy(update={"cartesian_ramp": True})
+    spec = task.spec.model_copy(update={"planner": planner})
+    worker = RolloutWorker(task, "panda")
+    sim = worker.panda_sim(particle.X_GM)
+    assert not sim.settings.cartesian_ramp
+    worker.set_task(spec)  # same parts: the world is kept, and follows the new settings
+    assert worker.panda_sim(particle.X_GM) is sim and sim.settings.cartesian_ramp
+    worker.close()
+    assert RolloutWorker(spec, "panda").settings.cartesian_ramp
+
+
 def test_ramped_motion_into_the_hole_reaches_the_bottom(worker, nominal_peg):
     task, particle = nominal_peg
     down = moved(task.X_WG0, xyz=(0, 0, -0.135))  # 5 mm below the hole bottom

@@ -39,14 +39,17 @@ class RolloutWorker:
         self._panda: dict[bytes, PandaSim] = {}
         self._floating: FloatingSim | None = None
         self.task = self._as_task(task)
-        self.settings = self._task_settings(settings or SimSettings())
+        self._own = settings or SimSettings()
+        self.settings = self._task_settings()
 
-    def _task_settings(self, settings: SimSettings) -> SimSettings:
+    def _task_settings(self) -> SimSettings:
+        """The worker's own settings with the task's step, contact distance and ramp."""
         planner = self.task.spec.planner
         return replace(
-            settings,
+            self._own,
             timestep_s=planner.sim_timestep_s,
             contact_distance_m=planner.contact_distance_m,
+            cartesian_ramp=self._own.cartesian_ramp or planner.cartesian_ramp,
         )
 
     @staticmethod
@@ -59,7 +62,11 @@ class RolloutWorker:
         if _geometry(new.spec) != _geometry(self.task.spec):
             self.close()
         self.task = new
-        self.settings = self._task_settings(self.settings)
+        self.settings = self._task_settings()
+        for sim in self._panda.values():  # kept worlds follow the new task's settings
+            sim.settings = self.settings
+        if self._floating is not None:
+            self._floating.settings = self.settings
 
     def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
         return [self._one(r) for r in requests]

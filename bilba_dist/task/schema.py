@@ -141,6 +141,10 @@ class PlannerParams(Strict):
     # PyBullet at 240 Hz (PHYSICS.md: 500/1000 Hz gave the same outcomes at 2×/4× the cost);
     # the authors used 0.005 s in Drake.
     sim_timestep_s: float = Field(default=1 / 240, gt=0)
+    # Panda: move the joint reference through IK waypoints on the hand's straight line
+    # (ours; off = a straight line in joint space, which bows the hand ~2 mm on an 8 cm
+    # move). README, Physics rollouts.
+    cartesian_ramp: bool = False
     # In contact when closer than this. The authors used 1 mm in Drake; in PyBullet a resting
     # contact sits at about -0.01 mm, and a 1 mm threshold flips on pegs resting 0.99 mm
     # from a wall (measured: early-stopped vs full-length rollouts disagreed on 1 in 50).
