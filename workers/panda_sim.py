@@ -57,9 +57,10 @@ class JointImpedance:
     def clipped(self, q_ref: np.ndarray, x: np.ndarray) -> np.ndarray:
         """``Jᵀ clip(K J e) + k_n N e − B_q q̇`` for ``x = [q; q̇]``, ``e = q_ref − q``: the
         rare step far from the setpoint, where the spring wrench is over its limit."""
-        wrench = self.ref_gains[:6] @ (q_ref - x[:7])
+        error = q_ref - x[:7]
+        wrench = self.ref_gains[:6] @ error
         wrench *= self.limit / math.sqrt(wrench @ wrench)
-        return self.Jt @ wrench + self.K_null @ (q_ref - x[:7]) - self.B_q @ x[7:]
+        return self.Jt @ wrench + self.K_null @ error - self.B_q @ x[7:]
 
 
 class PandaSim:
@@ -178,26 +179,26 @@ class PandaSim:
         return n_max, False
 
     def _ramp(self, q0: np.ndarray, q_d: np.ndarray, G_d: pin.SE3, n: int) -> np.ndarray:
-        """The joint reference at each of ``n`` ramp steps, ending at ``q_d``.
+        """The joint reference at each of ``n`` ramp steps, ending at ``q_d``: piecewise
+        linear through knots spaced evenly in ramp time.
 
-        Straight in joint space by default. With ``cartesian_ramp``, through IK waypoints
-        every ``ramp_waypoint_steps`` steps along the hand's SE(3) geodesic (as the floating
-        model's setpoint moves): a straight joint ramp bows the hand ~2 mm off the line on
-        an 8 cm descent, more than the puzzle's clearance."""
-        s = np.minimum(1.0, np.arange(1, n + 1) / n)
-        segments = math.ceil(n / self.settings.ramp_waypoint_steps)
-        if not self.settings.cartesian_ramp or segments < 2:
-            return q0 + s[:, None] * (q_d - q0)
-        rotations, positions = ramp_poses(self.model.fk(q0), G_d, segments)
+        The knots are just ``q0`` and ``q_d`` (a straight line in joint space) by default.
+        With ``cartesian_ramp`` they add IK waypoints every ``ramp_waypoint_steps`` steps
+        along the hand's SE(3) geodesic (as the floating model's setpoint moves): a straight
+        joint ramp bows the hand ~2 mm off the line on an 8 cm descent, more than the
+        puzzle's clearance."""
         knots = [q0]
-        try:
-            for R, p_ in zip(rotations[:-1], positions[:-1], strict=True):
-                knots.append(self.model.ik(pin.SE3(R, p_), knots[-1]))
-        except UnreachableError:  # a waypoint out of reach: fall back to the joint line
-            return q0 + s[:, None] * (q_d - q0)
+        segments = math.ceil(n / self.settings.ramp_waypoint_steps)
+        if self.settings.cartesian_ramp and segments >= 2:
+            rotations, positions = ramp_poses(self.model.fk(q0), G_d, segments)
+            try:
+                for R, p_ in zip(rotations[:-1], positions[:-1], strict=True):
+                    knots.append(self.model.ik(pin.SE3(R, p_), knots[-1]))
+            except UnreachableError:  # a waypoint out of reach: the joint line after all
+                knots = [q0]
         path = np.array([*knots, q_d])
-        t = s * segments
-        j = np.minimum(t.astype(int), segments - 1)
+        t = np.minimum(1.0, np.arange(1, n + 1) / n) * (len(path) - 1)
+        j = np.minimum(t.astype(int), len(path) - 2)
         return path[j] + (t - j)[:, None] * (path[j + 1] - path[j])
 
     def _result(
