@@ -35,6 +35,15 @@ SETTINGS = {
 }
 
 
+def patience(text: str) -> int:
+    """``--sample-patience``: a count, 0 or more (the task schema's bound; model_copy of the
+    planner parameters would not check it)."""
+    value = int(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
+    return value
+
+
 def mad(values: list[float]) -> float:
     centre = statistics.median(values)
     return statistics.median(abs(v - centre) for v in values)
@@ -53,7 +62,7 @@ def main() -> None:
         choices=list(PLANNERS),
     )
     parser.add_argument("--model", choices=["panda", "floating"], default="panda")
-    parser.add_argument("--sample-patience", type=int, default=None)
+    parser.add_argument("--sample-patience", type=patience, default=None)
     args = parser.parse_args()
     rows = {}
     with ray_session(args.workers, None):
