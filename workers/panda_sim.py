@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 import pybullet as p
+from numpy._core import umath
 
 from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
@@ -148,24 +149,25 @@ class PandaSim:
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
         read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
-        dot, add, low, high = np.dot, np.add, np.maximum, np.minimum
+        dot, add, clip = np.dot, np.add, umath.clip  # the ufunc: np.clip's wrapper costs 3×
         G, limit2, last = gains.state_gains, s.spring_limit**2, n_ramp - 1
         tau_min, tau_max = -TORQUE_LIMITS, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
         x, out, tau = np.empty(14), np.empty(13), np.empty(7)  # x = [q; q̇]
         q, wrench, spring = x[:7], out[:6], out[6:]
+        norm2 = wrench.dot  # bound once: half the cost of np.dot(wrench, wrench)
+        # physicsClientId passed by position: PyBullet's keyword parsing costs ~2 µs a call
         for k in range(n_max):
-            states = read(robot, joints, physicsClientId=client)
+            states = read(robot, joints, client)
             x[:] = [st[0] for st in states] + [st[1] for st in states]
             i = k if k < last else last
             add(dot(G, x, out=out), feed[i], out=out)
-            if dot(wrench, wrench) > limit2:  # rare: only far from the setpoint
+            if norm2(wrench) > limit2:  # rare: only far from the setpoint
                 spring[:] = gains.clipped(ramp[i], x)
-            add(spring, gravity(model, data, q), out=tau)
-            high(low(tau, tau_min, out=tau), tau_max, out=tau)
+            clip(add(spring, gravity(model, data, q), out=tau), tau_min, tau_max, out=tau)
             command(robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client)
             t0 = timer()
-            step(physicsClientId=client)
+            step(client)
             physics += timer() - t0
             if watch and k >= last:
                 if all(-calm < st[1] < calm for st in states):
