@@ -128,15 +128,23 @@ class FloatingSim:
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
         world, step, timer, log3 = p.WORLD_FRAME, p.stepSimulation, time.perf_counter, pin.log3
+        pose, twist, matrix = (
+            p.getBasePositionAndOrientation,
+            p.getBaseVelocity,
+            p.getMatrixFromQuaternion,
+        )
+        force, torque = p.applyExternalForce, p.applyExternalTorque
         still, physics, limit = 0, 0.0, s.spring_limit
-        error, velocity = np.empty(6), np.empty(6)
+        error, velocity, R_WM = np.empty(6), np.empty(6), np.empty((3, 3))
+        flat_R = R_WM.reshape(9)  # a view: R_WM is filled in place
+        # physicsClientId passed by position: PyBullet's keyword parsing costs ~2 µs a call
         for k in range(n_max):
-            position, orientation = p.getBasePositionAndOrientation(body, physicsClientId=client)
-            linear, angular = p.getBaseVelocity(body, physicsClientId=client)
-            R_WM = np.array(p.getMatrixFromQuaternion(orientation)).reshape(3, 3)
+            position, orientation = pose(body, client)
+            linear, angular = twist(body, client)
+            flat_R[:] = matrix(orientation)
             r = R_WM @ p_MG  # from the part's origin to the gripper point, world
-            p_G = np.asarray(position) + r
-            i = min(k, n_ramp - 1)
+            p_G = r + position
+            i = k if k < n_ramp else n_ramp - 1
             error[:3] = log3(ramp_R[i] @ (R_WM @ R_MG).T)
             error[3:] = ramp_p[i] - p_G
             velocity[:3] = angular
@@ -151,10 +159,10 @@ class FloatingSim:
                 spring *= limit / norm
             wrench = spring - B @ velocity
             forces = wrench.tolist()  # pybullet reads lists ~2.5× faster than arrays
-            p.applyExternalForce(body, -1, forces[3:], p_G.tolist(), world, physicsClientId=client)
-            p.applyExternalTorque(body, -1, forces[:3], world, physicsClientId=client)
+            force(body, -1, forces[3:], p_G.tolist(), world, client)
+            torque(body, -1, forces[:3], world, client)
             t0 = timer()
-            step(physicsClientId=client)
+            step(client)
             physics += timer() - t0
             if s.early_stop and k + 1 >= n_ramp:
                 calm = (
