@@ -13,7 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 import pybullet as p
-from numpy._core import umath
+
+try:  # the ufunc behind np.clip, without its Python wrapper (3x the cost of the clip itself)
+    from numpy._core.umath import clip as clip_ufunc  # type: ignore[attr-defined]
+except ImportError:  # numpy 1.x
+    clip_ufunc = np.clip
 
 from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
@@ -149,7 +153,7 @@ class PandaSim:
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
         read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
-        dot, add, clip = np.dot, np.add, umath.clip  # the ufunc: np.clip's wrapper costs 3×
+        dot, add, clip = np.dot, np.add, clip_ufunc
         G, limit2, last = gains.state_gains, s.spring_limit**2, n_ramp - 1
         tau_min, tau_max = -TORQUE_LIMITS, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
