@@ -2,13 +2,13 @@
 
     .venv/bin/python benchmarks/planning.py [--seeds 5] [--workers 2] [--timeout 300]
         [--settings peg-pitch peg-x peg-y puzzle-x] [--planners bilba-variable bilba-fixed b-est]
-        [--model panda|floating] [--sample-patience N]
+        [--model panda|floating] [--sample-patience N] [--race-contacts N]
 
 Each plan runs on a pool of Ray rollout actors (local, --workers CPUs) started once per
 setting; the time quoted is the planner's own (Ray and actor start-up excluded), including,
 with `--model floating`, the replay that validates each plan on the Panda.
-`--sample-patience` replaces the task files' `planner.sample_patience` (to compare settings
-without copying a task file). Prints a
+`--sample-patience` and `--race-contacts` replace the task files' `planner.sample_patience`
+and `planner.race_contacts` (to compare settings without copying a task file). Prints a
 table of median ± MAD per cell and ends with one JSON line (times in keys ending `_s`).
 Targets (issue 4, this 2-core machine): peg-in-hole median ≤ 10 s, puzzle ≤ 60 s, all
 successful.
@@ -22,7 +22,7 @@ import statistics
 import sys
 
 from bilba_dist.planning.bilba import PLANNERS, plan
-from bilba_dist.task.loader import build_task, load_task
+from bilba_dist.task.loader import load_task, with_planner
 from schedulers.session import ray_session
 from workers.pool import RayPool
 from workers.rollout_worker import RolloutWorker
@@ -35,9 +35,8 @@ SETTINGS = {
 }
 
 
-def patience(text: str) -> int:
-    """``--sample-patience``: a count, 0 or more (the task schema's bound; model_copy of the
-    planner parameters would not check it)."""
+def count(text: str) -> int:
+    """A planner count, 0 or more, checked here so a bad one fails before Ray starts."""
     value = int(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f"must be 0 or more, got {value}")
@@ -62,18 +61,22 @@ def main() -> None:
         choices=list(PLANNERS),
     )
     parser.add_argument("--model", choices=["panda", "floating"], default="panda")
-    parser.add_argument("--sample-patience", type=patience, default=None)
+    parser.add_argument("--sample-patience", type=count, default=None)
+    parser.add_argument("--race-contacts", type=count, default=None)
     args = parser.parse_args()
+    overrides = {
+        key: value
+        for key, value in (
+            ("sample_patience", args.sample_patience),
+            ("race_contacts", args.race_contacts),
+        )
+        if value is not None
+    }
     rows = {}
     with ray_session(args.workers, None):
         for setting in args.settings:
             name, bound = SETTINGS[setting]
-            task = load_task(name, [bound])
-            if args.sample_patience is not None:
-                params = task.spec.planner.model_copy(
-                    update={"sample_patience": args.sample_patience}
-                )
-                task = build_task(task.spec.model_copy(update={"planner": params}), task.source)
+            task = with_planner(load_task(name, [bound]), **overrides)
             pool = RayPool(task, args.workers, args.model)
             panda = RolloutWorker(task, "panda") if args.model == "floating" else None
             for planner in args.planners:
@@ -106,8 +109,8 @@ def main() -> None:
     print(
         f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
         f"{args.workers} Ray workers; {args.seeds} seeds; timeout {args.timeout:g} s; "
-        f"{args.model} model; sample_patience "
-        f"{'from the task files' if args.sample_patience is None else args.sample_patience}"
+        f"{args.model} model; planner parameters from the task files"
+        + "".join(f", {key} {value}" for key, value in overrides.items())
     )
     print(
         f"{'setting':<10} {'planner':<15} {'median s':>9} {'MAD s':>7} {'success':>8} "
@@ -123,7 +126,7 @@ def main() -> None:
         for (setting, planner), r in rows.items()
         for key, value in r.items()
     }
-    meta = {"model": args.model, "sample_patience": args.sample_patience}
+    meta = {"model": args.model, **overrides}
     print(json.dumps({**figures, **meta}, sort_keys=True))
 
 

@@ -1,3 +1,5 @@
+from itertools import pairwise
+
 import networkx as nx
 import numpy as np
 import pytest
@@ -125,3 +127,27 @@ def test_goal_missing_from_the_slice_is_no_schedule(peg):
     with pytest.raises(NoScheduleError):
         graph.schedule()
     assert nx.is_directed(graph.graph)
+
+
+def test_alternatives_are_the_shortest_schedules_through_different_next_modes():
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    graph, schedule = belief_graph(task, initial_belief(task), task.X_WG0, SliceCache(task))
+    alternatives = graph.alternatives(FREE, 3)
+    assert alternatives[0] == schedule  # Dijkstra's own first
+    assert len(alternatives) == 3 and len({s[1] for s in alternatives}) == 3
+    for s in alternatives:
+        assert s[0] == FREE and s[-1] == task.goal and len(s) == len(schedule)
+        assert all(graph.graph.has_edge(a, b) for a, b in pairwise(s))
+    assert graph.alternatives(FREE, 1) == [schedule]
+    assert len(graph.alternatives(FREE, 10)) == 3  # free has only n_free = 3 edges
+    graph.prune(FREE, schedule[1])
+    assert graph.alternatives(FREE, 3)[0] == graph.schedule()
+    assert schedule[1] not in [s[1] for s in graph.alternatives(FREE, 3)]
+
+
+def test_alternatives_leave_out_longer_schedules(puzzle):
+    """From free, the puzzle's bar tops lead to the goal in more hops than Dijkstra's."""
+    graph, schedule = belief_graph(puzzle, initial_belief(puzzle), puzzle.X_WG0, SliceCache(puzzle))
+    alternatives = graph.alternatives(FREE, 3)
+    assert {len(s) for s in alternatives} == {len(schedule)}
+    assert len(alternatives) < len(graph.graph[FREE])

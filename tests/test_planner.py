@@ -223,3 +223,56 @@ def test_sample_patience_stops_scoring_when_nothing_improves(peg):
         assert winner is None and all(s.count == 0 for s in scored)
         assert evaluator.rollouts == rollouts
     worker.close()
+
+
+def _first_contact(task, worker, rng_seed, race_contacts):
+    """The first step from free of ``task``'s belief, with or without a race."""
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.modes.schedule import belief_graph
+    from bilba_dist.planning.bilba import contact_search
+    from bilba_dist.planning.evaluate import Evaluator
+    from bilba_dist.planning.make_contact import make_contact, race
+    from bilba_dist.task.loader import with_planner
+
+    task = with_planner(task, race_contacts=race_contacts)
+    search = contact_search(task, Evaluator(worker), "bilba-fixed", deadline=float("inf"))
+    b0 = start_belief(task, initial_belief(task))
+    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, search.cache)
+    rng = np.random.default_rng(rng_seed)
+    schedules = graph.alternatives(FREE, race_contacts)
+    if race_contacts > 1:
+        return schedules, race(search, b0, schedules, rng), search.evaluator.rollouts
+    (schedule,) = schedules
+    outcome = make_contact(search, b0, schedule[1], frozenset(schedule[1:]), rng)
+    return schedules, (0, outcome), search.evaluator.rollouts
+
+
+def test_race_finds_a_first_contact_that_holds_a_spread_belief():
+    """Under grasp.x ±1 cm, Dijkstra's tie-break picks the chamfer facing the spread, which
+    no motion makes for all three particles at once; the race follows a chamfer along it."""
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    worker = RolloutWorker(task, "panda")
+    schedules, won, rollouts = _first_contact(task, worker, 0, 3)
+    worker.close()
+    assert schedules[0][1] == ContactPair("wall_mx/chamfer", "peg/-x")
+    assert won is not None
+    j, outcome = won
+    assert j > 0 and outcome.success and len(outcome.steps) == 1
+    accept = frozenset(schedules[j][1:])
+    assert all(contacts & accept for contacts in outcome.belief.contacts)
+    assert rollouts <= 2 * 3 * 3 * 8  # race_chunks rounds x 3 contacts x 3 particles x chunk
+
+
+def test_race_won_by_dijkstras_contact_in_its_first_chunk_changes_nothing(peg):
+    """Pitch ±2°: Dijkstra's first contact is made by the first chunk, so the race returns
+    the motion MakeContact finds from the same random state."""
+    worker = RolloutWorker(peg, "panda")
+    _, (_, plain), plain_rollouts = _first_contact(peg, worker, 3, 0)
+    _, won, race_rollouts = _first_contact(peg, worker, 3, 3)
+    worker.close()
+    assert won is not None and won[0] == 0 and plain.success
+    assert race_rollouts == plain_rollouts <= 3 * 8  # one chunk, nothing else simulated
+    (a,), (b,) = plain.steps, won[1].steps
+    assert a.contact == b.contact and a.score == b.score
+    assert np.array_equal(a.motion.G_d.homogeneous, b.motion.G_d.homogeneous)
+    assert np.array_equal(a.motion.K, b.motion.K)

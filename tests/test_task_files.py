@@ -82,6 +82,10 @@ BAD_FILES = {
         lambda d: _set(d, -1, "planner", "sample_patience"),
         r":\d+: planner\.sample_patience: .*greater than or equal to 0",
     ),
+    "negative race": (
+        lambda d: _set(d, -2, "planner", "race_contacts"),
+        r":\d+: planner\.race_contacts: .*greater than or equal to 0",
+    ),
     "non-convex piece": (
         lambda d: d["environment"]["pieces"][1]["convex"]["vertices"].append([0.05, 0.0, 0.05]),
         r"piece 'wall_px' is not convex",
@@ -217,3 +221,17 @@ def test_robot_start_needs_a_pose_or_joints(peg_yaml, tmp_path):
     result = run_cli("graph", str(write_task(tmp_path, data)))
     assert result.exit_code == 2
     assert "robot_start: give the start as 'gripper'" in result.stderr
+
+
+def test_with_planner_replaces_and_validates_planner_parameters(peg):
+    from bilba_dist.errors import TaskError
+    from bilba_dist.task.loader import with_planner
+
+    changed = with_planner(peg, race_contacts=0, sample_patience=4)
+    assert changed.spec.planner.race_contacts == 0 and changed.spec.planner.sample_patience == 4
+    assert peg.spec.planner.race_contacts == 3  # the task file's; the original is untouched
+    assert changed.goal == peg.goal and changed.source == peg.source
+    with pytest.raises(TaskError, match=r"^planner\.race_chunks: .*greater than or equal to 1$"):
+        with_planner(peg, race_chunks=0)
+    with pytest.raises(TaskError, match=r"^planner\.racing: Extra inputs"):
+        with_planner(peg, racing=3)

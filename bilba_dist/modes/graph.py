@@ -20,6 +20,8 @@ from bilba_dist.geometry.contact import FREE, ContactPair
 
 #: Points sampled on each mode's region to find the modes nearest the belief.
 NEAREST_SAMPLES = 32
+#: Two schedules' costs within this are "as many hops" (each hop costs 1 − δ_proj·|u·n|).
+TIE = 0.5
 
 
 @dataclass(frozen=True)
@@ -63,6 +65,27 @@ class ModeGraph:
             raise NoScheduleError(
                 f"no path in the mode graph from {start} to {self.goal}"
             ) from None
+
+    def alternatives(self, start: ContactPair, k: int) -> list[list[ContactPair]]:
+        """Up to ``k`` schedules from ``start`` to the goal with as many hops as the cheapest,
+        each through a different next mode: Dijkstra's own first, then by cost and name.
+
+        With δ_proj ≪ 1 every hop costs about 1, so schedules of equal length differ only by
+        the tie-break; these are the contacts a planner may race before committing."""
+        best = self.schedule(start)
+        to_goal = nx.single_source_dijkstra_path_length(
+            self.graph.reverse(copy=False), self.goal, weight="cost"
+        )
+        limit = to_goal[start] + TIE
+        totals = {
+            m: data["cost"] + to_goal[m]
+            for m, data in self.graph[start].items()
+            if m in to_goal and m != best[1] and data["cost"] + to_goal[m] <= limit
+        }
+        others = sorted(totals, key=lambda m: (totals[m], m))[: max(0, k - 1)]
+        return [best] + [
+            [start, *nx.dijkstra_path(self.graph, m, self.goal, "cost")] for m in others
+        ]
 
     def prune(self, u: ContactPair, v: ContactPair) -> None:
         """Remove the edge u → v (a transition that failed)."""

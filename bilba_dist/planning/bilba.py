@@ -19,11 +19,13 @@ from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.gp import GPParams
 from bilba_dist.planning.make_contact import (
+    ContactOutcome,
     ContactSearch,
     PlanningTimeoutError,
     Step,
     StiffnessRule,
     make_contact,
+    race,
 )
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlannedMotion, PlanResult
@@ -79,7 +81,39 @@ def plan(
     b0 = start_belief(task, particles)
     result = PlanResult(False, "", [], variant, seed)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
-    search = ContactSearch(
+    deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
+    search = contact_search(task, evaluator, variant, deadline, clock)
+    search.on_progress = lambda contact, best: _show(progress, contact, best)
+    search.recorder = recorder or NullRecorder()
+    try:
+        graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
+        _attempts(task, graph, b0, search, rng, result, panda)
+    except NoScheduleError as exc:
+        result.reason = (
+            f"edges pruned until no schedule was left ({len(result.pruned)} pruned); "
+            f"last: {result.reason}"
+            if result.pruned
+            else f"no contact schedule: {exc}"
+        )
+    except PlanningTimeoutError:
+        result.reason = f"timeout after {clock() - started:.1f} s"
+    if result.success and validate_on is not None:
+        _validate(task, result, b0, validate_on)
+    result.planning_time_s = clock() - started
+    result.rollouts = evaluator.rollouts
+    return result
+
+
+def contact_search(
+    task: Task,
+    evaluator: Evaluator,
+    variant: Variant,
+    deadline: float,
+    clock: Callable[[], float] = time.perf_counter,
+) -> ContactSearch:
+    """What MakeContact needs for ``task``, from its planner parameters."""
+    params = task.spec.planner
+    return ContactSearch(
         evaluator=evaluator,
         cache=SliceCache(task),
         stiffness=_stiffness_rule(task, variant),
@@ -98,28 +132,11 @@ def plan(
             params.gp_restarts,
         ),
         motion_timeout_s=params.motion_timeout_s,
-        deadline=started + (timeout_s if timeout_s is not None else params.timeout_s),
+        deadline=deadline,
         clock=clock,
-        on_progress=lambda contact, best: _show(progress, contact, best),
-        recorder=recorder or NullRecorder(),
+        race_contacts=params.race_contacts,
+        race_chunks=params.race_chunks,
     )
-    try:
-        graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
-        _attempts(task, graph, b0, search, rng, result, panda)
-    except NoScheduleError as exc:
-        result.reason = (
-            f"edges pruned until no schedule was left ({len(result.pruned)} pruned); "
-            f"last: {result.reason}"
-            if result.pruned
-            else f"no contact schedule: {exc}"
-        )
-    except PlanningTimeoutError:
-        result.reason = f"timeout after {clock() - started:.1f} s"
-    if result.success and validate_on is not None:
-        _validate(task, result, b0, validate_on)
-    result.planning_time_s = clock() - started
-    result.rollouts = evaluator.rollouts
-    return result
 
 
 def _validate(task: Task, result: PlanResult, b0: Belief, backend: RolloutBackend) -> None:
@@ -150,11 +167,8 @@ def _attempts(
         belief, mode, steps = b0, FREE, []
         graph.reweight(_positions(belief))
         while True:
-            schedule = graph.schedule(mode)
-            result.schedules.append(schedule)
-            search.recorder.schedule(attempt, schedule)
+            schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)
             target = schedule[1]
-            outcome = make_contact(search, belief, target, frozenset(schedule[1:]), rng)
             if not outcome.success:
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))
@@ -173,6 +187,41 @@ def _attempts(
         f"all {result.attempts} attempts failed ({len(result.pruned)} edges pruned); "
         f"last: {result.reason}"
     )
+
+
+def _next_contact(
+    graph: ModeGraph,
+    belief: Belief,
+    mode: ContactPair,
+    search: ContactSearch,
+    rng: np.random.Generator,
+    attempt: int,
+    result: PlanResult,
+) -> tuple[list[ContactPair], ContactOutcome]:
+    """MakeContact for the next contact of Dijkstra's schedule from ``mode``. With
+    ``race_contacts`` = k > 1, first race the next contacts of up to k schedules as short
+    as Dijkstra's (its tie-break picks among them, and under a spread along a chamfer's
+    normal it picks one the belief cannot make at once) and follow the winner; else, or
+    when none wins, the full search on Dijkstra's."""
+    k = search.race_contacts
+    schedules = graph.alternatives(mode, k) if k > 1 else [graph.schedule(mode)]
+    if len(schedules) > 1:
+        won = race(
+            search, belief, schedules, rng, lambda j: _follow(search, attempt, result, schedules[j])
+        )
+        if won is not None:
+            j, outcome = won
+            return schedules[j], outcome
+    schedule = schedules[0]
+    _follow(search, attempt, result, schedule)
+    return schedule, make_contact(search, belief, schedule[1], frozenset(schedule[1:]), rng)
+
+
+def _follow(
+    search: ContactSearch, attempt: int, result: PlanResult, schedule: list[ContactPair]
+) -> None:
+    result.schedules.append(schedule)
+    search.recorder.schedule(attempt, schedule)
 
 
 def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:

@@ -37,6 +37,8 @@ class ContactSearch:
     deadline: float
     clock: Callable[[], float]
     max_motions: int = 4
+    race_contacts: int = 0  # tied schedules raced before the full search (≤ 1: off)
+    race_chunks: int = 2  # chunks of sampled setpoints per contact in a race
     on_progress: Callable[[str, float], None] = field(default=lambda contact, best: None)
     recorder: Recorder = field(default_factory=NullRecorder)
 
@@ -84,14 +86,53 @@ def make_contact(
     )
 
 
-def best_motion(
+def race(
     search: ContactSearch,
     belief: Belief,
-    mode: ContactPair,
-    accept: Accept,
+    schedules: list[list[ContactPair]],
     rng: np.random.Generator,
-) -> Scored | None:
-    """Sampled setpoints first (screened per particle); then GP rounds if none works for all."""
+    on_start: Callable[[int], None] = lambda j: None,
+) -> tuple[int, ContactOutcome] | None:
+    """Race the next contacts of ``schedules``: a chunk of sampled setpoints for each in
+    turn, ``race_chunks`` rounds, no GP; the first motion that brings every particle into
+    its schedule's next contact (or a later one) wins. None when none did.
+
+    Each contact's setpoints are drawn when it first runs (``on_start(j)``), so when the
+    first schedule wins its first chunk, the draws and the motion are those MakeContact
+    would have made without a race."""
+    chunk, drawn = search.evaluator.chunk, list[list[Candidate]]()
+    for round_ in range(search.race_chunks):
+        for j, schedule in enumerate(schedules):
+            mode, accept = schedule[1], frozenset(schedule[1:])
+            if j == len(drawn):
+                on_start(j)
+                drawn.append(sampled_candidates(search, belief, mode, rng)[1])
+            _check(search)
+            batch = drawn[j][round_ * chunk : (round_ + 1) * chunk]
+            scored, winner = search.evaluator.score(
+                belief, batch, accept, _recording(search, mode, belief)
+            )
+            _report(search, mode, winner or best_of(scored))
+            if winner is not None and winner.posterior is not None:
+                search.recorder.transition(
+                    mode,
+                    winner.candidate.motion,
+                    belief,
+                    winner.posterior,
+                    winner.score,
+                    winner.count,
+                    True,
+                )
+                step = Step(winner.candidate.motion, mode, winner.score)
+                return j, ContactOutcome(True, [step], winner.posterior)
+    return None
+
+
+def sampled_candidates(
+    search: ContactSearch, belief: Belief, mode: ContactPair, rng: np.random.Generator
+) -> tuple[np.ndarray, list[Candidate]]:
+    """The stiffness for ``mode`` and setpoints sampled on it for each particle, taken a
+    particle at a time; each candidate is screened on the particle it was made for."""
     K = search.stiffness(belief, mode, rng)
     per_particle = [
         [
@@ -107,15 +148,33 @@ def best_motion(
         ]
         for i in range(len(belief))
     ]
-    candidates = [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
-    _check(search)
+    return K, [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
 
+
+def _recording(
+    search: ContactSearch, mode: ContactPair, belief: Belief
+) -> Callable[[Scored], None]:
     def record(s: Scored) -> None:
         assert s.posterior is not None
         search.recorder.transition(
             mode, s.candidate.motion, belief, s.posterior, s.score, s.count, False
         )
 
+    return record
+
+
+def best_motion(
+    search: ContactSearch,
+    belief: Belief,
+    mode: ContactPair,
+    accept: Accept,
+    rng: np.random.Generator,
+) -> Scored | None:
+    """Sampled setpoints first (screened per particle); then GP rounds if none works for all."""
+    K, candidates = sampled_candidates(search, belief, mode, rng)
+    _check(search)
+
+    record = _recording(search, mode, belief)
     scored, winner = search.evaluator.score(
         belief, candidates, accept, record, search.setpoints.patience
     )

@@ -16,7 +16,13 @@ from bilba_dist.errors import BilbaError, TaskError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
-from bilba_dist.task.schema import PartSpec, PoseSpec, TaskSpec, parse_axis_values
+from bilba_dist.task.schema import (
+    PartSpec,
+    PlannerParams,
+    PoseSpec,
+    TaskSpec,
+    parse_axis_values,
+)
 from bilba_dist.task.yaml_lines import Location, line_of, load_yaml_with_lines, read_text
 
 
@@ -130,6 +136,17 @@ def build_task(spec: TaskSpec, source: str) -> Task:
         X_WG0=start_gripper_pose(spec),
         goal=goal,
     )
+
+
+def with_planner(task: Task, **changes: Any) -> Task:
+    """``task`` with some planner parameters replaced, validated like a task file's (a
+    pydantic ``model_copy`` would not check them): a bad value is a one-line TaskError."""
+    try:
+        planner = PlannerParams.model_validate({**task.spec.planner.model_dump(), **changes})
+    except ValidationError as exc:
+        error = exc.errors()[0]
+        raise TaskError(f"planner.{_dotted(error['loc'])}: {error['msg']}") from None
+    return build_task(task.spec.model_copy(update={"planner": planner}), task.source)
 
 
 def start_gripper_pose(spec: TaskSpec) -> pin.SE3:

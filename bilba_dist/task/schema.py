@@ -129,6 +129,12 @@ class PlannerParams(Strict):
     # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); the puzzle keeps 0
     # until enough runs choose (README, Benchmarks).
     sample_patience: int = Field(default=0, ge=0)
+    # Before the full MakeContact, race the next contacts of up to this many schedules as
+    # short as Dijkstra's (whose tie-break picks among them): race_chunks chunks of sampled
+    # setpoints each, in turn, no GP; follow the first motion that brings every particle in
+    # (ours; 0 or 1, the default, follows Dijkstra's schedule alone, as the authors do).
+    race_contacts: int = Field(default=0, ge=0)
+    race_chunks: int = Field(default=2, ge=1)
     gp_test_points: int = Field(default=1000, ge=1)
     gp_noise: float = Field(default=0.02, ge=0)
     gp_simulated: int = Field(default=31, ge=1)
