@@ -231,3 +231,59 @@ def test_early_stop_changes_no_contact_set(model):
     assert [r.contacts for r in early] == [r.contacts for r in full]
     assert sum(r.settled for r in early) >= 40  # it does stop early on most
     assert sum(r.sim_time_s for r in early) < 0.6 * sum(r.sim_time_s for r in full)
+
+
+@pytest.mark.parametrize("far", [False, True], ids=["within the spring limit", "clipped"])
+def test_compiled_control_step_matches_the_impedance_law(far):
+    """The compiled step against the law written out in numpy, at random gains and states:
+    τ = clip(Jᵀ·clip(K J e) + k_n N e − B_q q̇ + g, ±limits), e = q_ref − q."""
+    from bilba_dist.robot.panda import Q_CENTRE, TORQUE_LIMITS, PandaModel
+    from workers.control_step import joint_torque
+    from workers.panda_sim import JointImpedance
+
+    rng = np.random.default_rng(7)
+    model = PandaModel()
+    settled = 0
+    for _ in range(40):
+        q_d = Q_CENTRE + rng.normal(scale=0.2, size=7)
+        A = rng.normal(size=(6, 6))
+        K = A @ A.T * 50 + np.diag([10, 10, 10, 100, 100, 100.0])
+        gains = JointImpedance.at(model, q_d, K, SimSettings())
+        ramp = q_d + rng.normal(scale=0.02, size=(5, 7))
+        x = np.concatenate(
+            [
+                ramp[3] + rng.normal(scale=0.3 if far else 0.002, size=7),
+                rng.normal(scale=0.05, size=7),
+            ]
+        )
+        g = rng.normal(scale=5, size=7)
+        e = ramp[3] - x[:7]
+        wrench = gains.ref_gains[:6] @ e
+        norm = np.linalg.norm(wrench)
+        assert (norm > 20.0) == far
+        wrench = wrench * min(1.0, 20.0 / norm)
+        expected = gains.Jt @ wrench + gains.K_null @ e - gains.B_q @ x[7:] + g
+        expected = np.clip(expected, -TORQUE_LIMITS, TORQUE_LIMITS)
+        tau = np.empty(7)
+        feed = ramp @ gains.ref_gains.T
+        calm = 0.1
+        still = joint_torque(
+            gains.state_gains,
+            feed,
+            ramp,
+            3,
+            x,
+            gains.ref_gains[:6],
+            gains.Jt,
+            gains.K_null,
+            gains.B_q,
+            20.0,
+            g,
+            TORQUE_LIMITS,
+            tau,
+            calm,
+        )
+        assert np.allclose(tau, expected, rtol=1e-9, atol=1e-9)
+        assert still == bool(np.all(np.abs(x[7:]) < calm))
+        settled += still
+    assert 0 < settled < 40  # both answers of the settle test were checked

@@ -14,15 +14,11 @@ import numpy as np
 import pinocchio as pin
 import pybullet as p
 
-try:  # the ufunc behind np.clip, without its Python wrapper (3x the cost of the clip itself)
-    from numpy._core.umath import clip as clip_ufunc  # type: ignore[attr-defined]
-except ImportError:  # numpy 1.x
-    clip_ufunc = np.clip
-
 from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
+from workers.control_step import joint_torque
 from workers.motion import SimStats, damping, label_final_contacts, ramp_poses, ramp_steps
 from workers.scene import EnvironmentBodies, connect
 from workers.settings import SimSettings
@@ -58,14 +54,6 @@ class JointImpedance:
         ref_gains = np.vstack([KJ, J.T @ KJ + K_null])
         state_gains = np.hstack([-ref_gains, np.vstack([np.zeros((6, 7)), -B_q])])
         return cls(state_gains, ref_gains, J.T.copy(), K_null, B_q, s.spring_limit)
-
-    def clipped(self, q_ref: np.ndarray, x: np.ndarray) -> np.ndarray:
-        """``Jᵀ clip(K J e) + k_n N e − B_q q̇`` for ``x = [q; q̇]``, ``e = q_ref − q``: the
-        rare step far from the setpoint, where the spring wrench is over its limit."""
-        error = q_ref - x[:7]
-        wrench = self.ref_gains[:6] @ error
-        wrench *= self.limit / math.sqrt(wrench @ wrench)
-        return self.Jt @ wrench + self.K_null @ error - self.B_q @ x[7:]
 
 
 class PandaSim:
@@ -141,8 +129,9 @@ class PandaSim:
     def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool]:
         """Step the controller until the motion has settled or timed out.
 
-        The per-step Python is half of a step's time, so the loop keeps to preallocated
-        arrays and few numpy calls (issue 3's overhead figure; benchmarks/rollouts.py)."""
+        Our per-step Python rivals the physics step, so the loop makes four calls a step —
+        read the joints, gravity (Pinocchio), the compiled torque and settle test, send the
+        torques — into preallocated arrays (issue 3's overhead figure; benchmarks/rollouts.py)."""
         s, client, robot, joints = self.settings, self.client, self.robot, self.joints
         gains = JointImpedance.at(self.model, q_d, motion.K, s)
         n_ramp = ramp_steps(self.model.fk(q0), motion.G_d, s)
@@ -153,28 +142,32 @@ class PandaSim:
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
         read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
-        dot, add, clip = np.dot, np.add, clip_ufunc
-        G, limit2, last = gains.state_gains, s.spring_limit**2, n_ramp - 1
-        tau_min, tau_max = -TORQUE_LIMITS, TORQUE_LIMITS
+        G, KJ, Jt, K_null, B_q = (
+            gains.state_gains,
+            gains.ref_gains[:6],
+            gains.Jt,
+            gains.K_null,
+            gains.B_q,
+        )
+        limit, last, tau_max = s.spring_limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
-        x, out, tau = np.empty(14), np.empty(13), np.empty(7)  # x = [q; q̇]
-        q, wrench, spring = x[:7], out[:6], out[6:]
-        norm2 = wrench.dot  # bound once: half the cost of np.dot(wrench, wrench)
+        x, tau = np.empty(14), np.empty(7)  # x = [q; q̇]
+        q = x[:7]
         # physicsClientId passed by position: PyBullet's keyword parsing costs ~2 µs a call
         for k in range(n_max):
             states = read(robot, joints, client)
             x[:] = [st[0] for st in states] + [st[1] for st in states]
             i = k if k < last else last
-            add(dot(G, x, out=out), feed[i], out=out)
-            if norm2(wrench) > limit2:  # rare: only far from the setpoint
-                spring[:] = gains.clipped(ramp[i], x)
-            clip(add(spring, gravity(model, data, q), out=tau), tau_min, tau_max, out=tau)
+            still_now = joint_torque(
+                G, feed, ramp, i, x, KJ, Jt, K_null, B_q, limit, gravity(model, data, q),
+                tau_max, tau, calm,
+            )  # fmt: skip
             command(robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client)
             t0 = timer()
             step(client)
             physics += timer() - t0
             if watch and k >= last:
-                if all(-calm < st[1] < calm for st in states):
+                if still_now:
                     still += 1
                     if still >= n_window:
                         self.stats.add(k + 1, physics)
