@@ -82,9 +82,8 @@ def plan(
     result = PlanResult(False, "", [], variant, seed)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
     deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
-    search = contact_search(task, evaluator, variant, deadline, clock)
+    search = contact_search(task, evaluator, variant, deadline, clock, recorder)
     search.on_progress = lambda contact, best: _show(progress, contact, best)
-    search.recorder = recorder or NullRecorder()
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         _attempts(task, graph, b0, search, rng, result, panda)
@@ -110,6 +109,7 @@ def contact_search(
     variant: Variant,
     deadline: float,
     clock: Callable[[], float] = time.perf_counter,
+    recorder: Recorder | None = None,
 ) -> ContactSearch:
     """What MakeContact needs for ``task``, from its planner parameters."""
     params = task.spec.planner
@@ -136,6 +136,7 @@ def contact_search(
         clock=clock,
         race_contacts=params.race_contacts,
         race_chunks=params.race_chunks,
+        recorder=recorder or NullRecorder(),
     )
 
 

@@ -74,10 +74,7 @@ def make_contact(
         if best is None or best.posterior is None or best.count <= before:
             reason = f"no motion brought more particles into {mode} ({before}/{len(belief)})"
             return ContactOutcome(False, steps, belief, reason)
-        steps.append(Step(best.candidate.motion, mode, best.score))
-        search.recorder.transition(
-            mode, best.candidate.motion, belief, best.posterior, best.score, best.count, True
-        )
+        steps.append(_accept(search, mode, belief, best))
         belief = best.posterior
         if best.count == len(belief):
             return ContactOutcome(True, steps, belief)
@@ -114,18 +111,18 @@ def race(
             )
             _report(search, mode, winner or best_of(scored))
             if winner is not None and winner.posterior is not None:
-                search.recorder.transition(
-                    mode,
-                    winner.candidate.motion,
-                    belief,
-                    winner.posterior,
-                    winner.score,
-                    winner.count,
-                    True,
-                )
-                step = Step(winner.candidate.motion, mode, winner.score)
+                step = _accept(search, mode, belief, winner)
                 return j, ContactOutcome(True, [step], winner.posterior)
     return None
+
+
+def _accept(search: ContactSearch, mode: ContactPair, belief: Belief, best: Scored) -> Step:
+    """Record ``best`` as the motion taken from ``belief`` towards ``mode``."""
+    assert best.posterior is not None
+    search.recorder.transition(
+        mode, best.candidate.motion, belief, best.posterior, best.score, best.count, True
+    )
+    return Step(best.candidate.motion, mode, best.score)
 
 
 def sampled_candidates(
