@@ -149,7 +149,7 @@ class PandaSim:
             gains.K_null,
             gains.B_q,
         )
-        limit, last, tau_max = s.spring_limit, n_ramp - 1, TORQUE_LIMITS
+        limit, last, tau_max = gains.limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
         x, tau = np.empty(14), np.empty(7)  # x = [q; q̇]
         q = x[:7]
