@@ -268,20 +268,7 @@ def test_compiled_control_step_matches_the_impedance_law(far):
         feed = ramp @ gains.ref_gains.T
         calm = 0.1
         still = joint_torque(
-            gains.state_gains,
-            feed,
-            ramp,
-            3,
-            x,
-            gains.ref_gains[:6],
-            gains.Jt,
-            gains.K_null,
-            gains.B_q,
-            20.0,
-            g,
-            TORQUE_LIMITS,
-            tau,
-            calm,
+            gains.state_gains, feed, 3, x, gains.Jt, 20.0, g, TORQUE_LIMITS, tau, calm
         )
         assert np.allclose(tau, expected, rtol=1e-9, atol=1e-9)
         assert still == bool(np.all(np.abs(x[7:]) < calm))

@@ -15,13 +15,9 @@ from numba import njit
 def joint_torque(
     G: np.ndarray,
     feed: np.ndarray,
-    ramp: np.ndarray,
     i: int,
     x: np.ndarray,
-    KJ: np.ndarray,
     Jt: np.ndarray,
-    K_null: np.ndarray,
-    B_q: np.ndarray,
     limit: float,
     g: np.ndarray,
     tau_max: np.ndarray,
@@ -29,10 +25,14 @@ def joint_torque(
     calm: float,
 ) -> bool:
     """Whether every joint speed is under ``calm`` (the settle test); and write into ``tau``
-    the torque ``clip(Jᵀ w + k_n N e − B_q q̇ + g, ±tau_max)`` at ramp
-    step ``i`` for ``x = [q; q̇]``, ``e = ramp[i] − q``, ``w = K J e`` (norm-clipped at
-    ``limit``). Unclipped, ``G x + feed[i]`` gives ``[w; τ − g]`` in one 13×14 product
-    (`JointImpedance`); past the limit the wrench is scaled before mapping back."""
+    the torque ``clip(Jᵀ w + k_n N e − B_q q̇ + g, ±tau_max)`` at ramp step ``i`` for
+    ``x = [q; q̇]``, ``e = q_ref[i] − q``, ``w = K J e`` norm-clipped at ``limit``.
+
+    ``G x + feed[i]`` gives ``[w; τ − g]`` unclipped in one 13×14 product
+    (`JointImpedance`); past the limit the wrench is scaled by ``s = limit/|w|``, which
+    takes ``(1 − s) Jᵀ w`` off the torque. Ten arguments, not more: Numba types each one
+    on every call, and the loop calls this at every physics step."""
+    w = np.empty(6)
     w2 = 0.0
     for r in range(13):
         acc = 0.0
@@ -40,14 +40,17 @@ def joint_torque(
             acc += G[r, c] * x[c]
         acc += feed[i, r]
         if r < 6:
+            w[r] = acc
             w2 += acc * acc
         else:
             tau[r - 6] = acc
     if w2 > limit * limit:  # rare: only far from the setpoint
-        e = ramp[i] - x[:7]
-        w = KJ @ e
-        w *= limit / math.sqrt(w @ w)
-        tau[:] = Jt @ w + K_null @ e - B_q @ x[7:]
+        cut = 1.0 - limit / math.sqrt(w2)
+        for j in range(7):
+            acc = 0.0
+            for r in range(6):
+                acc += Jt[j, r] * w[r]
+            tau[j] -= cut * acc
     still = True
     for j in range(7):
         tau[j] = min(max(tau[j] + g[j], -tau_max[j]), tau_max[j])

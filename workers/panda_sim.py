@@ -142,13 +142,7 @@ class PandaSim:
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
         read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
-        G, KJ, Jt, K_null, B_q = (
-            gains.state_gains,
-            gains.ref_gains[:6],
-            gains.Jt,
-            gains.K_null,
-            gains.B_q,
-        )
+        G, Jt = gains.state_gains, gains.Jt
         limit, last, tau_max = gains.limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
         x, tau = np.empty(14), np.empty(7)  # x = [q; q̇]
@@ -159,9 +153,8 @@ class PandaSim:
             x[:] = [st[0] for st in states] + [st[1] for st in states]
             i = k if k < last else last
             still_now = joint_torque(
-                G, feed, ramp, i, x, KJ, Jt, K_null, B_q, limit, gravity(model, data, q),
-                tau_max, tau, calm,
-            )  # fmt: skip
+                G, feed, i, x, Jt, limit, gravity(model, data, q), tau_max, tau, calm
+            )
             command(robot, joints, torque_control, forces=tau.tolist(), physicsClientId=client)
             t0 = timer()
             step(client)
