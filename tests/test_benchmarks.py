@@ -9,14 +9,22 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
-@pytest.mark.parametrize("flag", ["--sample-patience", "--race-contacts"])
-def test_planning_benchmark_refuses_a_negative_count_in_one_line(flag):
+@pytest.mark.parametrize(
+    ("flag", "value", "shown"),
+    [
+        ("--sample-patience", "-1", "-1"),
+        ("--race-contacts", "-1", "-1"),
+        ("--near-edges", "-0.001", "-0.001"),
+        ("--near-edges", "nan", "nan"),
+    ],
+)
+def test_planning_benchmark_refuses_a_negative_setting_in_one_line(flag, value, shown):
     run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "planning.py"), flag, "-1"],
+        [sys.executable, str(BENCHMARKS / "planning.py"), flag, value],
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if "error:" in line]
-    assert errors == [f"planning.py: error: argument {flag}: must be 0 or more, got -1"]
+    assert errors == [f"planning.py: error: argument {flag}: must be 0 or more, got {shown}"]

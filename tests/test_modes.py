@@ -10,7 +10,7 @@ from bilba_dist.errors import NoScheduleError
 from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.modes.graph import GraphParams, build_mode_graph, uncertainty_direction
 from bilba_dist.modes.schedule import SliceCache, belief_graph
-from bilba_dist.task.loader import load_task
+from bilba_dist.task.loader import load_task, with_planner
 
 SETTINGS = ["grasp.pitch=2deg", "grasp.roll=2deg", "grasp.x=1cm", "env.y=1cm", "grasp.z=5mm"]
 
@@ -151,3 +151,27 @@ def test_alternatives_leave_out_longer_schedules(puzzle):
     alternatives = graph.alternatives(FREE, 3)
     assert {len(s) for s in alternatives} == {len(schedule)}
     assert len(alternatives) < len(graph.graph[FREE])
+
+
+def _puzzle_graph(puzzle, near: float):
+    task = with_planner(puzzle, near_edge_m=near)
+    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, SliceCache(task))
+    return graph.graph
+
+
+def test_near_edges_join_the_bar_top_to_the_slot_beside_it(puzzle):
+    """On a bar's top, the part is 0.5 mm from the slot's far wall but shares no C-obs
+    vertex with it: only near edges give the graph that step (the drop into the opening)."""
+    top = ContactPair("bar_mx/+z", "foot_mx/-z")
+    far_wall = ContactPair("bar_px/-x", "foot_px/+x")
+    assert not _puzzle_graph(puzzle, 0.0).has_edge(top, far_wall)
+    near = _puzzle_graph(puzzle, 0.6e-3)
+    assert near.has_edge(top, far_wall) and near.has_edge(far_wall, top)
+    assert not _puzzle_graph(puzzle, 0.4e-3).has_edge(top, far_wall)
+
+
+def test_near_edges_only_add_to_the_vertex_graph(puzzle):
+    plain, near = _puzzle_graph(puzzle, 0.0), _puzzle_graph(puzzle, 1e-3)
+    assert set(plain.nodes) == set(near.nodes)
+    assert set(plain.edges) < set(near.edges)
+    assert set(_puzzle_graph(puzzle, 0.6e-3).edges) <= set(near.edges)

@@ -1,7 +1,8 @@
 """The contact-mode graph of a C-obs slice, weighted for a belief, searched with Dijkstra.
 
 Vertices are modes (contact pairs) found at boundary vertices of the slice; an edge joins two
-modes that occur together at a boundary vertex. The free mode connects to the ``n_free``
+modes that occur together at a boundary vertex (and, with ``near_edge_m``, two whose regions
+come that close: a short move through free space). The free mode connects to the ``n_free``
 modes nearest the belief. The cost of entering mode v is ``1 − δ_proj·|u(b)·n(v)|``: u(b) is
 the principal direction of the particles' position spread and n(v) the C-obs normal of v,
 so contacts whose normal points along the uncertainty are slightly preferred.
@@ -13,6 +14,7 @@ from itertools import combinations
 
 import networkx as nx
 import numpy as np
+from scipy.spatial import cKDTree
 
 from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.errors import NoScheduleError
@@ -29,6 +31,7 @@ class GraphParams:
     n_free: int = 3
     delta_proj: float = 1e-4
     min_mode_vertices: int = 4
+    near_edge_m: float = 0.0
 
 
 class ModeGraph:
@@ -120,12 +123,32 @@ def build_mode_graph(
         for contacts in cslice.vertex_contacts
         for pair in combinations(sorted(contacts & kept), 2)
     }
+    if params.near_edge_m > 0:
+        pairs |= near_pairs(cslice, modes, params.near_edge_m)
     for a, b in sorted(pairs):
         graph.add_edge(a, b, cost=edge_cost(u, normals[b], params.delta_proj))
         graph.add_edge(b, a, cost=edge_cost(u, normals[a], params.delta_proj))
     for m in nearest_modes(cslice, modes, positions.mean(axis=0), params.n_free):
         graph.add_edge(FREE, m, cost=edge_cost(u, normals[m], params.delta_proj))
     return ModeGraph(cslice, graph, goal, params.delta_proj)
+
+
+def near_pairs(
+    cslice: CObsSlice, modes: list[ContactPair], distance: float
+) -> set[tuple[ContactPair, ContactPair]]:
+    """Pairs of ``modes`` whose regions (boundary vertices and ``NEAREST_SAMPLES`` points
+    sampled on each, seeded) come within ``distance`` of each other."""
+    rng = np.random.default_rng(0)
+    points, owner = [], []
+    for k, m in enumerate(modes):
+        region = np.concatenate(
+            [cslice.mode_vertices(m), cslice.sample_mode(m, NEAREST_SAMPLES, rng)]
+        )
+        points.append(region)
+        owner += [k] * len(region)
+    close = cKDTree(np.concatenate(points)).query_pairs(distance, output_type="ndarray")
+    who = np.asarray(owner)[close]
+    return {(modes[min(a, b)], modes[max(a, b)]) for a, b in who.tolist() if a != b}
 
 
 def edge_cost(u: np.ndarray, normal: np.ndarray, delta_proj: float) -> float:
