@@ -38,9 +38,7 @@ class JointImpedance:
 
     state_gains: np.ndarray  # [[-K J, 0], [-K_q, -B_q]] acting on [q; q̇], 13×14
     ref_gains: np.ndarray  # [K J; K_q] acting on q_ref, 13×7
-    Jt: np.ndarray  # Jᵀ, 7×6
-    K_null: np.ndarray  # k_n N, 7×7
-    B_q: np.ndarray  # Jᵀ B J + d_n N, 7×7
+    Jt: np.ndarray  # Jᵀ, 7×6 (past the spring limit: the wrench's share to take off)
     limit: float
 
     @classmethod
@@ -53,7 +51,7 @@ class JointImpedance:
         B_q = J.T @ damping(K) @ J + s.null_damping * N
         ref_gains = np.vstack([KJ, J.T @ KJ + K_null])
         state_gains = np.hstack([-ref_gains, np.vstack([np.zeros((6, 7)), -B_q])])
-        return cls(state_gains, ref_gains, J.T.copy(), K_null, B_q, s.spring_limit)
+        return cls(state_gains, ref_gains, J.T.copy(), s.spring_limit)
 
 
 class PandaSim:
