@@ -141,9 +141,7 @@ def near_pairs(
     rng = np.random.default_rng(0)
     points, owner = [], []
     for k, m in enumerate(modes):
-        region = np.concatenate(
-            [cslice.mode_vertices(m), cslice.sample_mode(m, NEAREST_SAMPLES, rng)]
-        )
+        region = region_points(cslice, m, rng)
         points.append(region)
         owner += [k] * len(region)
     close = cKDTree(np.concatenate(points)).query_pairs(distance, output_type="ndarray")
@@ -183,7 +181,13 @@ def nearest_modes(
     rng = np.random.default_rng(0)
     distance = {}
     for m in modes:
-        samples = cslice.sample_mode(m, NEAREST_SAMPLES, rng)
-        candidates = np.concatenate([samples, cslice.mode_vertices(m)])
-        distance[m] = float(np.linalg.norm(candidates - point, axis=1).min())
+        distance[m] = float(np.linalg.norm(region_points(cslice, m, rng) - point, axis=1).min())
     return sorted(modes, key=lambda m: (round(distance[m], 9), m))[:k]
+
+
+def region_points(cslice: CObsSlice, mode: ContactPair, rng: np.random.Generator) -> np.ndarray:
+    """Where ``mode``'s region is, as points: ``NEAREST_SAMPLES`` sampled on it, then its
+    boundary vertices."""
+    return np.concatenate(
+        [cslice.sample_mode(mode, NEAREST_SAMPLES, rng), cslice.mode_vertices(mode)]
+    )
