@@ -1,6 +1,6 @@
 """Rollout throughput of the two dynamics models, and where a step's time goes.
 
-    .venv/bin/python benchmarks/rollouts.py [--rollouts 10] [--repeats 5]
+    .venv/bin/python benchmarks/rollouts.py [--rollouts 10] [--repeats 5] [--window 3]
 
 One fixed motion (issue 3): the nominal peg-in-hole particle, the peg's bottom 2 cm above
 the chamfer, the setpoint ramped to 5 mm below the hole bottom, "very stiff" gains.
@@ -68,34 +68,40 @@ def measure(model: str, early_stop: bool, n: int, repeats: int) -> dict[str, flo
     }
 
 
-def _process(n: int, barrier, out) -> None:
+def _process(window_s: float, barrier, out) -> None:
     os.environ["OMP_NUM_THREADS"] = "1"
     task, request = fixed_request()
     worker = RolloutWorker(task, "panda", SimSettings(early_stop=True))
     worker.simulate([request])
     barrier.wait()
-    t0 = time.time()
-    worker.simulate([request] * n)
-    out.put((t0, time.time()))
+    t0 = done = time.perf_counter()
+    count = 0
+    while done - t0 < window_s:
+        worker.simulate([request])
+        count, done = count + 1, time.perf_counter()
+    out.put(count / (done - t0))
 
 
-def processes(count: int, n: int) -> float:
-    """Rollouts per second of ``count`` processes, each with its own worker."""
+def processes(count: int, window_s: float) -> float:
+    """Rollouts per second of ``count`` processes, each with its own worker, each counting
+    the rollouts it completes in the same window after a barrier (a pool's throughput: a
+    process started late or finishing early does not stretch the others' clock)."""
     ctx = mp.get_context("spawn")
     barrier, out = ctx.Barrier(count), ctx.Queue()
-    procs = [ctx.Process(target=_process, args=(n, barrier, out)) for _ in range(count)]
+    procs = [ctx.Process(target=_process, args=(window_s, barrier, out)) for _ in range(count)]
     for proc in procs:
         proc.start()
-    spans = [out.get() for _ in procs]
+    rates = [out.get() for _ in procs]
     for proc in procs:
         proc.join()
-    return count * n / (max(e for _, e in spans) - min(s for s, _ in spans))
+    return sum(rates)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=int, default=10)
     parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--window", type=float, default=3.0, help="seconds per process run")
     args = parser.parse_args()
     rows = {
         (model, early): measure(model, early, args.rollouts, args.repeats)
@@ -103,9 +109,9 @@ def main() -> None:
         for early in (False, True)
     }
     ratios = []
-    for _ in range(args.repeats):  # longer runs: process start-up and the barrier add noise
-        one = processes(1, 5 * args.rollouts)
-        two = processes(2, 5 * args.rollouts)
+    for _ in range(args.repeats):  # one and two processes in turn, each for --window s
+        one = processes(1, args.window)
+        two = processes(2, args.window)
         ratios.append(two / one)
     print(
         f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
