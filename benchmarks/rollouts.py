@@ -69,7 +69,6 @@ def measure(model: str, early_stop: bool, n: int, repeats: int) -> dict[str, flo
 
 
 def _process(window_s: float, barrier, out) -> None:
-    os.environ["OMP_NUM_THREADS"] = "1"
     task, request = fixed_request()
     worker = RolloutWorker(task, "panda", SimSettings(early_stop=True))
     worker.simulate([request])
@@ -86,6 +85,7 @@ def processes(count: int, window_s: float) -> float:
     """Rollouts per second of ``count`` processes, each with its own worker, each counting
     the rollouts it completes in the same window after a barrier (a pool's throughput: a
     process started late or finishing early does not stretch the others' clock)."""
+    os.environ["OMP_NUM_THREADS"] = "1"  # as Ray gives its actors; read at the child's imports
     ctx = mp.get_context("spawn")
     barrier, out = ctx.Barrier(count), ctx.Queue()
     procs = [ctx.Process(target=_process, args=(window_s, barrier, out)) for _ in range(count)]
