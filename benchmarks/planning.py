@@ -3,13 +3,14 @@
     .venv/bin/python benchmarks/planning.py [--seeds 5] [--workers 2] [--timeout 300]
         [--settings peg-pitch peg-x peg-y puzzle-x] [--planners bilba-variable bilba-fixed b-est]
         [--model panda|floating] [--sample-patience N] [--race-contacts N] [--near-edges M]
+        [--press M]
 
 Each plan runs on a pool of Ray rollout actors (local, --workers CPUs) started once per
 setting; the time quoted is the planner's own (Ray and actor start-up excluded), including,
 with `--model floating`, the replay that validates each plan on the Panda.
-`--sample-patience`, `--race-contacts` and `--near-edges` replace the task files'
-`planner.sample_patience`, `planner.race_contacts` and `planner.near_edge_m` (to compare
-settings without copying a task file). Prints a
+`--sample-patience`, `--race-contacts`, `--near-edges` and `--press` replace the task
+files' `planner.sample_patience`, `planner.race_contacts`, `planner.near_edge_m` and
+`planner.setpoint_press_m` (to compare settings without copying a task file). Prints a
 table of median ± MAD per cell and ends with one JSON line (times in keys ending `_s`).
 Targets (issue 4, this 2-core machine): peg-in-hole median ≤ 10 s, puzzle ≤ 60 s, all
 successful.
@@ -73,6 +74,7 @@ def main() -> None:
     parser.add_argument("--sample-patience", type=count, default=None)
     parser.add_argument("--race-contacts", type=count, default=None)
     parser.add_argument("--near-edges", type=metres, default=None, metavar="M")
+    parser.add_argument("--press", type=metres, default=None, metavar="M")
     args = parser.parse_args()
     overrides = {
         key: value
@@ -80,6 +82,7 @@ def main() -> None:
             ("sample_patience", args.sample_patience),
             ("race_contacts", args.race_contacts),
             ("near_edge_m", args.near_edges),
+            ("setpoint_press_m", args.press),
         )
         if value is not None
     }

@@ -16,6 +16,7 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
         ("--race-contacts", "-1", "-1"),
         ("--near-edges", "-0.001", "-0.001"),
         ("--near-edges", "nan", "nan"),
+        ("--press", "-0.02", "-0.02"),
     ],
 )
 def test_planning_benchmark_refuses_a_negative_setting_in_one_line(flag, value, shown):

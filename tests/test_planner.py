@@ -12,10 +12,12 @@ from bilba_dist.belief.start import start_state
 from bilba_dist.belief.state import LAMBDA, Belief, contact_iou, d_bel, d_bel_union
 from bilba_dist.cli.main import cli, register
 from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.plan.file import plan_document, read_plan, write_plan
 from bilba_dist.plan.replay import replay
 from bilba_dist.planning.bilba import furthest_common, plan
 from bilba_dist.planning.result import PlanResult
+from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
 from bilba_dist.task.loader import load_task
 from workers.rollout_worker import RolloutWorker
@@ -64,6 +66,31 @@ def pitch_plan():
     result = plan(task, worker, "bilba-variable", seed=3)
     yield task, worker, result
     worker.close()
+
+
+def test_setpoints_fall_back_to_the_start_rotation_where_a_tilt_loses_the_mode():
+    """Resting on a bar, the puzzle's part is tilted by ~1e-4 rad; at that rotation the
+    slot-wall mode of its lower block (0.25 mm clearance) has no sampled point, so the
+    samples come from the start rotation, and the setpoints command it."""
+    task = load_task("puzzle")
+    particle, cache = initial_belief(task)[0], SliceCache(task)
+    mode = ContactPair("bar_px/-x", "lower/+x")
+    start = task.X_WG0 * particle.X_GM
+    tilted = start * pin.SE3(pin.exp3(np.array([-4e-5, 2e-5, 7e-5])), np.zeros(3))
+    R_tilted = (particle.X_WO.inverse() * tilted).rotation
+    assert len(cache.get(R_tilted).sample_mode(mode, 16, np.random.default_rng(0))) == 0
+    params = SetpointParams(press_m=0.0)  # surface samples exactly on the mode's region
+    setpoints = sample_setpoints(particle, tilted, mode, cache, params, np.random.default_rng(0))
+    assert len(setpoints) == params.on_surface + params.noisy
+    cslice = cache.get((particle.X_WO.inverse() * start).rotation)
+    for G_d in setpoints:
+        X_OM = particle.X_WO.inverse() * G_d * particle.X_GM
+        assert np.allclose(X_OM.rotation, (particle.X_WO.inverse() * start).rotation)
+    surface = [
+        (particle.X_WO.inverse() * G_d * particle.X_GM).translation
+        for G_d in setpoints[: params.on_surface]
+    ]
+    assert all(mode in c for c in cslice.contacts(np.array(surface)))
 
 
 def test_seeded_plan_brings_every_particle_to_the_hole_bottom(pitch_plan):

@@ -121,6 +121,7 @@ def contact_search(
             params.setpoints_per_particle,
             params.noisy_setpoints,
             params.setpoint_noise_m,
+            params.setpoint_press_m,
             patience=params.sample_patience,
         ),
         gp=GPParams(

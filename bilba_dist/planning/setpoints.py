@@ -33,11 +33,22 @@ def sample_setpoints(
 ) -> list[pin.SE3]:
     """Gripper setpoints that would put this particle's manipuland in ``mode``, at its
     current rotation: ``on_surface`` on the mode's region, then ``noisy`` ones pushed by
-    noise (those that land outside C-obs keep their surface point)."""
-    X_OM = particle.X_WO.inverse() * X_WM
-    cslice = cache.get(X_OM.rotation)
+    noise (those that land outside C-obs keep their surface point).
+
+    Where the slice at the current rotation has no point of the mode, the samples are taken
+    at the particle's start rotation instead (the setpoints then command that rotation). A
+    part resting tilted by 1e-4 rad can lose a mode that needs its faces parallel to the
+    environment's (the puzzle's lower block against a slot wall, 0.25 mm clearance): with
+    no samples for that particle, MakeContact would only sample for the others."""
     total = params.on_surface + params.noisy
+    X_OM = particle.X_WO.inverse() * X_WM
+    rotation = X_OM.rotation
+    cslice = cache.get(rotation)
     points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
+    if len(points) == 0:
+        rotation = (particle.X_WO.inverse() * cache.task.X_WG0 * particle.X_GM).rotation
+        cslice = cache.get(rotation)
+        points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
     if len(points) == 0:
         return []
     points = points[rng.integers(len(points), size=total)] if len(points) < total else points
@@ -46,4 +57,4 @@ def sample_setpoints(
     inside = cslice.classify(moved) == INSIDE
     noisy[inside] = moved[inside]
     X_MG = particle.X_GM.inverse()
-    return [particle.X_WO * pin.SE3(X_OM.rotation, p) * X_MG for p in points]
+    return [particle.X_WO * pin.SE3(rotation, p) * X_MG for p in points]

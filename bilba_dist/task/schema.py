@@ -130,6 +130,11 @@ class PlannerParams(Strict):
     setpoints_per_particle: int = Field(default=32, ge=1)
     noisy_setpoints: int = Field(default=32, ge=0)
     setpoint_noise_m: float = Field(default=0.01, ge=0)
+    # Surface samples are pushed inside the C-obs by a depth uniform up to this [m] (the
+    # paper's "slightly inside"; 3 mm is ours, the paper gives no figure). Deeper presses
+    # push harder along the contact's normal, which a slide that must beat friction needs
+    # (README, the puzzle).
+    setpoint_press_m: float = Field(default=0.003, ge=0)
     # Stop scoring sampled setpoints once this many in a row bring no better score, and go
     # on to the GP rounds (ours; 0, the default, scores every sample, as the authors do).
     # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); the puzzle keeps 0
