@@ -5,7 +5,7 @@ import pinocchio as pin
 import pybullet as p
 import pytest
 
-from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.particles import initial_belief, make_particle
 from bilba_dist.belief.start import start_state
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
@@ -280,3 +280,30 @@ def test_compiled_control_step_matches_the_impedance_law(far):
         assert still == bool(np.all(np.abs(x[7:]) < calm))
         settled += still
     assert 0 < settled < 40  # both answers of the settle test were checked
+
+
+def test_a_four_motion_puzzle_plan_works_across_the_grasp_interval():
+    """The puzzle has a conformant plan in our physics for every grasp offset in ±1 cm (not
+    just the three planning particles): land on the -x bar's top, slide +x pressing down
+    until the part drops against the +x slot wall, drop onto the rail, slide +y until the
+    neck meets the far bar. Found by hand (README, the puzzle); 9 particles, 36 rollouts."""
+    task = load_task("puzzle")
+    particles = [make_particle(task, {"grasp.x": dx}) for dx in np.linspace(-0.01, 0.01, 9)]
+    soft_x = np.diag([100.0, 100.0, 100.0, 400.0, 600.0, 600.0])
+    R, x0 = task.X_WG0.rotation, task.X_WG0.translation[0]
+    motions = [  # (gripper x offset, y, z) [m], K
+        ((-0.01525, 0.0, 0.293), soft_x),
+        ((0.025, 0.0, 0.263), soft_x),
+        ((0.005, 0.0, 0.212), VERY_STIFF),
+        ((0.005, 0.0205, 0.215), VERY_STIFF),
+    ]
+    worker = RolloutWorker(task, "panda")
+    states = [start_state(task, q) for q in particles]
+    for (dx, y, z), K in motions:
+        G_d = pin.SE3(R, np.array([x0 + dx, y, z]))
+        results = worker.simulate(
+            [RolloutRequest(q, s, Motion(K, G_d)) for q, s in zip(particles, states, strict=True)]
+        )
+        states = [r.state for r in results]
+    worker.close()
+    assert [task.goal in r.contacts for r in results] == [True] * 9
