@@ -307,3 +307,29 @@ def test_a_four_motion_puzzle_plan_works_across_the_grasp_interval():
         states = [r.state for r in results]
     worker.close()
     assert [task.goal in r.contacts for r in results] == [True] * 9
+
+
+def test_a_rollout_does_not_depend_on_what_its_world_ran_before():
+    """restoreState leaves the broadphase pairs and contact manifolds: a rollout that starts
+    resting on a bar right after the rollout that put it there warm-started from that
+    rollout's contacts, and a seeded puzzle plan differed in-process and on Ray. Motions
+    from that plan (puzzle, nominal particle: a landing on the -y bar, then a slide)."""
+    task = load_task("puzzle")
+    particle = initial_belief(task)[0]
+    R = task.X_WG0.rotation
+    land_K = np.zeros((6, 6))
+    land_K[:3, :3] = [[60.7307, 0.0, -5.35658], [0.0, 100.0, 0.0], [-5.35658, 0.0, 99.2693]]
+    land_K[3:, 3:] = np.diag([600.0, 400.0, 600.0])
+    land = Motion(land_K, pin.SE3(R, np.array([0.490227, -0.003333, 0.267477])))
+    slide_K = np.diag([100.0, 60.0, 100.0, 400.0, 600.0, 600.0])
+    slide = Motion(slide_K, pin.SE3(R, np.array([0.493704, -0.000342, 0.266828])))
+    worker = RolloutWorker(task, "panda")
+    (landed,) = worker.simulate([RolloutRequest(particle, start_state(task, particle), land)])
+    request = RolloutRequest(particle, landed.state, slide)
+    (after,) = worker.simulate([request])  # the same world, straight after the landing
+    fresh = RolloutWorker(task, "panda")
+    (alone,) = fresh.simulate([request])
+    worker.close()
+    fresh.close()
+    assert np.array_equal(after.state.q, alone.state.q)
+    assert np.array_equal(after.state.X_WM.homogeneous, alone.state.X_WM.homogeneous)

@@ -82,6 +82,7 @@ class FloatingSim:
 
     def reset(self, X_WO: pin.SE3, X_WM: pin.SE3, V_WM: np.ndarray) -> None:
         p.restoreState(self.clean, physicsClientId=self.client)
+        self.env.forget_contacts()
         self.env.place(X_WO)
         p.resetBasePositionAndOrientation(
             self.body,

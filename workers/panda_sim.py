@@ -97,6 +97,7 @@ class PandaSim:
     def reset(self, X_WO: pin.SE3, q: np.ndarray, dq: np.ndarray) -> None:
         """Put the world in a known state: no history carries over between rollouts."""
         p.restoreState(self.clean, physicsClientId=self.client)
+        self.env.forget_contacts()
         self.env.place(X_WO)
         for j, qi, dqi in zip(self.joints, q, dq, strict=True):
             p.resetJointState(self.robot, j, qi, dqi, physicsClientId=self.client)

@@ -14,6 +14,8 @@ import pybullet as p
 
 from bilba_dist.geometry.piece import ConvexPiece, Part
 
+FAR = pin.SE3(np.eye(3), np.array([100.0, 100.0, 100.0]))  # out of every AABB of a world
+
 
 def connect(timestep_s: float, gravity: float) -> int:
     """A new DIRECT client with the given step; always pass its id on."""
@@ -62,6 +64,15 @@ class EnvironmentBodies:
             bodies.append(body)
             offsets.append(X_OP)
         return cls(client, part, bodies, offsets)
+
+    def forget_contacts(self) -> None:
+        """Drop every contact the world remembers: with the environment far away, collision
+        detection removes the broadphase pairs and their contact manifolds. restoreState
+        leaves them, so their warm-start impulses carried one rollout's end into the next
+        rollout of that world (a 4e-7 rad difference after a puzzle rollout that starts
+        resting on a bar), and a seeded plan differed between in-process and Ray."""
+        self.place(FAR)
+        p.performCollisionDetection(physicsClientId=self.client)
 
     def place(self, X_WO: pin.SE3) -> None:
         for body, X_OP in zip(self.bodies, self.offsets, strict=True):
