@@ -122,8 +122,7 @@ class PlannerParams(Strict):
     # Also join two modes whose C-obs regions come within this distance [m]: the short
     # free-space move between them (a part sliding off a bar's top into a slot just beside
     # it). Vertex sharing alone misses such steps (ours; 0, the default, is the authors'
-    # graph; on the puzzle 0.6 mm, just over its 0.5 mm side clearances, planned 1 of 10
-    # runs against 0 of 3 without: not yet shown to pay, so no task sets it; README).
+    # graph; the puzzle sets 0.6 mm, just over its 0.5 mm side clearances; README).
     near_edge_m: float = Field(default=0.0, ge=0)
     n_attempts: int = Field(default=50, ge=1)
     timeout_s: float = Field(default=900.0, gt=0)
