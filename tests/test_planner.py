@@ -82,15 +82,11 @@ def test_setpoints_fall_back_to_the_start_rotation_where_a_tilt_loses_the_mode()
     params = SetpointParams(press_m=0.0)  # surface samples exactly on the mode's region
     setpoints = sample_setpoints(particle, tilted, mode, cache, params, np.random.default_rng(0))
     assert len(setpoints) == params.on_surface + params.noisy
-    cslice = cache.get((particle.X_WO.inverse() * start).rotation)
-    for G_d in setpoints:
-        X_OM = particle.X_WO.inverse() * G_d * particle.X_GM
-        assert np.allclose(X_OM.rotation, (particle.X_WO.inverse() * start).rotation)
-    surface = [
-        (particle.X_WO.inverse() * G_d * particle.X_GM).translation
-        for G_d in setpoints[: params.on_surface]
-    ]
-    assert all(mode in c for c in cslice.contacts(np.array(surface)))
+    X_OMs = [particle.X_WO.inverse() * G_d * particle.X_GM for G_d in setpoints]
+    R_start = (particle.X_WO.inverse() * start).rotation
+    assert all(np.allclose(X_OM.rotation, R_start) for X_OM in X_OMs)
+    surface = np.array([X_OM.translation for X_OM in X_OMs[: params.on_surface]])
+    assert all(mode in c for c in cache.get(R_start).contacts(surface))
 
 
 def test_seeded_plan_brings_every_particle_to_the_hole_bottom(pitch_plan):
