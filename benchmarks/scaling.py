@@ -1,7 +1,7 @@
 """How planning scales on Ray: one plan on 1 and 2 rollout actors against in-process rollouts,
 and a batch grid on 1 and 2 CPUs.
 
-    .venv/bin/python benchmarks/scaling.py [--seeds 5] [--settings peg-pitch peg-x puzzle-x]
+    .venv/bin/python benchmarks/scaling.py [--seeds 5] [--settings peg-pitch peg-x ...]
         [--jobs-seeds 3]
 
 One plan per setting (bilba-variable): each seed in-process, on 1 actor and on 2 (one local
@@ -26,6 +26,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
+from planning import SETTINGS  # benchmarks/planning.py: name -> (task, uncertainty)
+
 from bilba_dist.planning.bilba import plan
 from bilba_dist.task.loader import load_task
 from schedulers.batch import run_batch
@@ -33,12 +35,6 @@ from schedulers.jobs import load_jobs
 from schedulers.session import ray_session
 from workers.pool import RayPool
 from workers.rollout_worker import RolloutWorker
-
-SETTINGS = {  # name -> (task, uncertainty); puzzle-x (minutes a seed) only when asked
-    "peg-pitch": ("peg-in-hole", "grasp.pitch=2deg"),
-    "peg-x": ("peg-in-hole", "grasp.x=1cm"),
-    "puzzle-x": ("puzzle", "grasp.x=1cm"),
-}
 
 
 def one_plan(name: str, bound: str, seeds: int) -> dict[str, list[float]]:

@@ -68,8 +68,8 @@ class EnvironmentBodies:
     def forget_contacts(self) -> None:
         """Drop every contact the world remembers: with the environment far away, collision
         detection removes the broadphase pairs and their contact manifolds. restoreState
-        leaves them, so their warm-start impulses carried one rollout's end into the next
-        rollout of that world (a 4e-7 rad difference after a puzzle rollout that starts
+        leaves them, so what they held (warm-start impulses, we take it) carried one
+        rollout's end into the next rollout of that world (a 4e-7 rad difference after a puzzle rollout that starts
         resting on a bar), and a seeded plan differed between in-process and Ray."""
         self.place(FAR)
         p.performCollisionDetection(physicsClientId=self.client)
