@@ -69,8 +69,9 @@ class EnvironmentBodies:
         """Drop every contact the world remembers: with the environment far away, collision
         detection removes the broadphase pairs and their contact manifolds. restoreState
         leaves them, so what they held (warm-start impulses, we take it) carried one
-        rollout's end into the next rollout of that world (a 4e-7 rad difference after a puzzle rollout that starts
-        resting on a bar), and a seeded plan differed between in-process and Ray."""
+        rollout's end into the next rollout of that world (4e-7 rad apart after a puzzle
+        rollout that starts resting on a bar), and a seeded plan differed in-process and
+        on Ray."""
         self.place(FAR)
         p.performCollisionDetection(physicsClientId=self.client)
 
