@@ -7,6 +7,7 @@ motion — and hands batches to a `RolloutBackend`; results come back in request
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 from typing import Literal, Protocol
 
 import numpy as np
@@ -26,6 +27,14 @@ def _frozen(array: np.ndarray | Sequence[float] | None, shape: tuple[int, ...]) 
     return a
 
 
+@lru_cache(maxsize=1024)
+def _is_psd(K_bytes: bytes) -> bool:
+    """Whether the 6×6 matrix (as bytes) is symmetric positive semi-definite. Cached: a
+    contact's candidate motions share one K, and an eigendecomposition costs ~80 µs."""
+    K = np.frombuffer(K_bytes).reshape(6, 6)
+    return bool(np.allclose(K, K.T, atol=1e-9) and np.linalg.eigvalsh(K).min() >= -1e-9)
+
+
 @dataclass(frozen=True)
 class Motion:
     """A compliant motion ``u = (K, G_d)`` run for ``timeout_s``: ``K`` is the 6×6 Cartesian
@@ -38,7 +47,7 @@ class Motion:
 
     def __post_init__(self) -> None:
         K = _frozen(self.K, (6, 6))
-        if not np.allclose(K, K.T, atol=1e-9) or np.linalg.eigvalsh(K).min() < -1e-9:
+        if not _is_psd(K.tobytes()):
             raise ValueError("stiffness K must be symmetric positive semi-definite")
         object.__setattr__(self, "K", K)
         if self.timeout_s <= 0:

@@ -222,6 +222,20 @@ def fixed_motion_set(task, n: int, seed: int):
     return requests
 
 
+@pytest.mark.parametrize(
+    "K",
+    [
+        np.triu(np.ones((6, 6))),  # not symmetric
+        np.diag([100.0, 100.0, 100.0, 600.0, 600.0, -1.0]),  # a negative stiffness
+        np.full((6, 6), np.nan),
+    ],
+)
+def test_a_motion_refuses_a_stiffness_that_is_not_symmetric_psd(K):
+    for _ in range(2):  # the check is cached: a refused K stays refused
+        with pytest.raises(ValueError, match="symmetric positive semi-definite"):
+            Motion(K, pin.SE3.Identity())
+
+
 @pytest.mark.parametrize("model", ["panda", "floating"])
 def test_early_stop_changes_no_contact_set(model):
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
