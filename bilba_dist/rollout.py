@@ -92,6 +92,12 @@ class RolloutResult:
 
 
 class RolloutBackend(Protocol):
-    """Simulate (particle, motion) pairs; results in request order."""
+    """Simulate (particle, motion) pairs; results in request order.
 
-    def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]: ...
+    ``prefetch``: requests the caller will probably ask for next (the same objects). A
+    backend with idle workers may start them now; either way a rollout's result depends
+    only on its request, so the answer to the later call is the same."""
+
+    def simulate(
+        self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
+    ) -> list[RolloutResult]: ...

@@ -65,6 +65,44 @@ def test_a_pool_on_the_first_actor_shares_it_and_closing_it_kills_nothing(local_
         assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
 
 
+def _same(results, expected):
+    assert [r.contacts for r in results] == [r.contacts for r in expected]
+    for a, b in zip(results, expected, strict=True):
+        assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
+
+
+def test_prefetched_rollouts_are_the_ones_asked_for_next(local_ray):
+    """A pool of two runs the guessed next batch on an idle actor; asked for next, those
+    results are reused (not rerun) and equal what in-process rollouts give."""
+    from workers.pool import RayPool
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    first, then = fixed_motion_set(task, 2, seed=7), fixed_motion_set(task, 6, seed=8)
+    local = RolloutWorker(task, "panda")
+    pool = RayPool(task, 2)
+    _same(pool.simulate(first, prefetch=then), local.simulate(first))
+    _same(pool.simulate(then), local.simulate(then))
+    pool.close()
+    assert pool.guessed > 0 and pool.guessed_used == pool.guessed
+
+
+def test_guesses_not_asked_for_are_dropped_and_one_actor_does_not_guess(local_ray):
+    from workers.pool import RayPool
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    first, unused = fixed_motion_set(task, 2, seed=7), fixed_motion_set(task, 6, seed=8)
+    other = fixed_motion_set(task, 3, seed=9)
+    local = RolloutWorker(task, "panda")
+    pool = RayPool(task, 2)
+    one = pool.first(1)
+    _same(pool.simulate(first, prefetch=unused), local.simulate(first))
+    _same(pool.simulate(other), local.simulate(other))
+    assert pool.guessed > 0 and pool.guessed_used == 0 and not pool._ahead
+    _same(one.simulate(first, prefetch=unused), local.simulate(first))
+    assert one.guessed == 0
+    pool.close()
+
+
 def test_killing_a_worker_process_mid_plan_still_gives_the_same_plan(local_ray):
     """The actor restarts (re-running its constructor) and its lost rollouts are retried."""
     import os

@@ -1,15 +1,26 @@
-"""Rollout backends: in-process (one RolloutWorker) and a pool of Ray actors.
+"""Rollout backends on Ray: a pool of actors, each a RolloutWorker with its own PyBullet worlds.
 
-`RayPool` hands a batch out in small groups to whichever actor is free (rollouts differ in
-length: early stop ends some at 0.5 s, others run 5 s, so fixed halves leave one actor
-idle), and returns the results in request order, so a seeded plan is the same on 1 worker
-or on N."""
+`RayPool` keeps every actor fed from one queue: the rollouts asked for first, then those the
+planner says it will probably ask for next (``prefetch``: the next chunk's screening
+rollouts), which an actor runs when the batch in hand leaves it idle — at the batch's tail,
+and while the planner thinks between batches. A rollout depends only on its request (each
+world forgets its contacts at reset), so a result computed ahead is the one a later call
+would compute; results return in request order, and a seeded plan is the same in-process,
+on 1 worker or on N. Prefetched rollouts the planner never asks for are dropped.
+"""
 
-from collections.abc import Sequence
+import math
+from collections import deque
+from collections.abc import Iterable, Sequence
+from typing import Any
 
 from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
 from bilba_dist.task.loader import Task
 from workers.rollout_worker import RolloutWorker
+
+#: Ray tasks in flight per actor: one running, one queued behind it, so an actor never
+#: waits a round trip for its next task.
+DEPTH = 2
 
 
 class RayPool:
@@ -23,10 +34,14 @@ class RayPool:
 
     def _use(self, actors: list, owner: bool) -> None:
         import ray
-        from ray.util import ActorPool
 
         self._ray, self.actors, self._owner = ray, actors, owner
-        self._pool = ActorPool(actors)
+        self._load = [0] * len(actors)  # tasks in flight per actor
+        self._running: dict[Any, int] = {}  # task ref -> actor index, until it is seen done
+        self._ahead: dict[int, tuple[RolloutRequest, Any, int]] = {}  # id(request) -> (request,
+        # task ref, index in the task's group): submitted, not yet asked for
+        self.guessed = 0  # prefetched rollouts submitted ...
+        self.guessed_used = 0  # ... and later asked for
 
     def first(self, workers: int) -> "RayPool":
         """A pool on this pool's first ``workers`` actors (already started and warm), for
@@ -35,17 +50,78 @@ class RayPool:
         pool._use(self.actors[:workers], owner=False)
         return pool
 
-    def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
+    def simulate(
+        self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
+    ) -> list[RolloutResult]:
+        """Results of ``requests`` in order; ``prefetch`` may run on otherwise idle actors."""
+        if not requests:
+            return []
+        keep = {id(r) for r in (*requests, *prefetch)}
+        self._ahead = {k: v for k, v in self._ahead.items() if k in keep}
+        where = {id(r): self._ahead.pop(id(r))[1:] for r in requests if id(r) in self._ahead}
+        self.guessed_used += len(where)
+        todo = _unique(r for r in requests if id(r) not in where)
+        taken = self._ahead.keys() | where.keys() | {id(r) for r in todo}
+        spare = _unique(r for r in prefetch if id(r) not in taken)
+        queue = deque([(group, True) for group in self._groups(todo)])
+        if len(self.actors) > 1:  # a guess runs only on an actor with nothing else to do
+            queue += [([request], False) for request in spare]
+        while True:
+            self._fill(queue, where)
+            urgent_left = bool(queue) and queue[0][1]
+            if not urgent_left and all(ref not in self._running for ref, _ in where.values()):
+                break
+            self._reap()
+        done = {ref: self._ray.get(ref) for ref in {ref for ref, _ in where.values()}}
+        return [done[where[id(r)][0]][where[id(r)][1]] for r in requests]
+
+    def _groups(self, requests: list[RolloutRequest]) -> list[list[RolloutRequest]]:
+        """Groups of about ``len / (DEPTH · actors)``, so that each actor gets about DEPTH
+        and none waits long at the tail; on one actor, one group."""
         if not requests:
             return []
         if len(self.actors) == 1:  # one call: groups only help to balance several actors
-            ref = self.actors[0].simulate.remote(list(requests))
-            return list(self._ray.get(ref))
-        size = max(1, len(requests) // (4 * len(self.actors)))  # ~4 groups per actor
-        groups = [list(requests[i : i + size]) for i in range(0, len(requests), size)]
-        done = self._pool.map(lambda actor, group: actor.simulate.remote(group), groups)
-        return [r for group in done for r in group]
+            return [list(requests)]
+        size = math.ceil(len(requests) / (DEPTH * len(self.actors)))
+        return [requests[i : i + size] for i in range(0, len(requests), size)]
+
+    def _fill(self, queue: deque, where: dict[int, tuple[Any, int]]) -> None:
+        """Submit queued groups, to the least loaded actor, while one has room."""
+        while queue and min(self._load) < (DEPTH if queue[0][1] else 1):
+            group, urgent = queue.popleft()
+            index = self._load.index(min(self._load))
+            ref = self.actors[index].simulate.remote(group)
+            self._load[index] += 1
+            self._running[ref] = index
+            self.guessed += 0 if urgent else len(group)
+            for k, request in enumerate(group):
+                if urgent:
+                    where[id(request)] = (ref, k)
+                else:
+                    self._ahead[id(request)] = (request, ref, k)
+
+    def _reap(self) -> None:
+        """Wait for at least one task in flight to finish; forget every one that has."""
+        refs = list(self._running)
+        self._ray.wait(refs, num_returns=1)
+        ready, _ = self._ray.wait(refs, num_returns=len(refs), timeout=0)
+        for ref in ready:
+            self._load[self._running.pop(ref)] -= 1
 
     def close(self) -> None:
-        for actor in self.actors if self._owner else []:
+        """Kill the actors (if this pool started them), once the guesses still running have
+        ended: a task killed with its actor is retried, and Ray says so on the terminal."""
+        if not self._owner:
+            return
+        if self._running:
+            self._ray.wait(list(self._running), num_returns=len(self._running), timeout=10)
+        for actor in self.actors:
             self._ray.kill(actor)
+
+
+def _unique(requests: Iterable[RolloutRequest]) -> list[RolloutRequest]:
+    """Each request object once, in order (the same object asked twice is one rollout)."""
+    seen: dict[int, RolloutRequest] = {}
+    for r in requests:
+        seen.setdefault(id(r), r)
+    return list(seen.values())

@@ -68,7 +68,10 @@ class RolloutWorker:
         if self._floating is not None:
             self._floating.settings = self.settings
 
-    def simulate(self, requests: Sequence[RolloutRequest]) -> list[RolloutResult]:
+    def simulate(
+        self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
+    ) -> list[RolloutResult]:
+        """Each request in turn (``prefetch`` is for backends with idle workers: unused)."""
         return [self._one(r) for r in requests]
 
     def _one(self, request: RolloutRequest) -> RolloutResult:

@@ -36,10 +36,16 @@ class Evaluator:
     chunk: int = 8  # candidates per batch
     rollouts: int = 0
     on_batch: Callable[[int], None] = field(default=lambda n: None)
+    # Screening requests of the current belief by candidate: one object per candidate, so a
+    # request prefetched from one call is the one a later call asks for.
+    _screens: dict[int, tuple[Candidate, RolloutRequest]] = field(default_factory=dict)
+    _screens_of: Belief | None = None
 
-    def run(self, belief: Belief, pairs: Sequence[tuple[int, Motion]]) -> list[RolloutResult]:
-        requests = [RolloutRequest(belief.particles[i], belief.states[i], m) for i, m in pairs]
-        results = self.backend.simulate(requests) if requests else []
+    def simulate(
+        self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
+    ) -> list[RolloutResult]:
+        """Run ``requests`` (counted); ``prefetch`` is what will probably come next."""
+        results = self.backend.simulate(requests, prefetch) if requests else []
         self.rollouts += len(results)
         self.on_batch(len(results))
         return results
@@ -51,15 +57,22 @@ class Evaluator:
         accept: Accept,
         on_scored: Callable[[Scored], None] = lambda scored: None,
         patience: int = 0,
+        then: Sequence[Candidate] = (),
     ) -> tuple[list[Scored], Scored | None]:
         """Score the candidates (screened) in order; stop at the first chunk with one that
         gets all into ``accept``, or, with ``patience`` > 0, once that many candidates in a
-        row (counted per chunk) have not raised the best score."""
+        row (counted per chunk) have not raised the best score. ``then``: the candidates the
+        caller will probably score next (on the same belief), whose screening a backend
+        may start while this call's last chunk runs."""
         scored: list[Scored] = []
         best, idle = 0.0, 0
-        for start in range(0, len(candidates), self.chunk):
-            batch = candidates[start : start + self.chunk]
-            chunk_scored = self._score_chunk(belief, batch, accept)
+        batches = [candidates[s : s + self.chunk] for s in range(0, len(candidates), self.chunk)]
+        batches.append(list(then[: self.chunk]))
+        for k, batch in enumerate(batches[:-1]):
+            ahead = self._screen(belief, batches[k + 1])
+            chunk_scored = self._score_chunk(
+                belief, batch, self._screen(belief, batch), ahead, accept
+            )
             for s in chunk_scored:
                 if s.posterior is not None:
                     on_scored(s)
@@ -73,12 +86,26 @@ class Evaluator:
                 break
         return scored, None
 
+    def _screen(self, belief: Belief, batch: Sequence[Candidate]) -> list[RolloutRequest]:
+        """The screening requests of ``batch`` (each candidate on its own particle)."""
+        if self._screens_of is not belief:
+            self._screens, self._screens_of = {}, belief
+        for c in batch:
+            if c.screen_on is not None and id(c) not in self._screens:
+                self._screens[id(c)] = (c, _requests(belief, [(c.screen_on, c.motion)])[0])
+        return [self._screens[id(c)][1] for c in batch if c.screen_on is not None]
+
     def _score_chunk(
-        self, belief: Belief, batch: Sequence[Candidate], accept: Accept
+        self,
+        belief: Belief,
+        batch: Sequence[Candidate],
+        own: Sequence[RolloutRequest],
+        ahead: Sequence[RolloutRequest],
+        accept: Accept,
     ) -> list[Scored]:
+        """``own``: the batch's screening requests; ``ahead``: the next batch's (prefetch)."""
         n = len(belief)
-        own = [(c.screen_on, c.motion) for c in batch if c.screen_on is not None]
-        own_results = iter(self.run(belief, own))
+        own_results = iter(self.simulate(own, ahead))
         screened: list[dict[int, RolloutResult]] = []
         for c in batch:
             first = {c.screen_on: next(own_results)} if c.screen_on is not None else {}
@@ -90,7 +117,9 @@ class Evaluator:
             for i in range(n)
             if i not in first
         ]
-        rest_results = self.run(belief, [(i, batch[k].motion) for k, i in rest])
+        rest_results = self.simulate(
+            _requests(belief, [(i, batch[k].motion) for k, i in rest]), ahead
+        )
         for (k, i), result in zip(rest, rest_results, strict=True):
             screened[k][i] = result
         out = []
@@ -101,6 +130,10 @@ class Evaluator:
             posterior = belief.after([results[i] for i in range(n)])
             out.append(Scored(c, posterior.score(accept), posterior.count(accept), posterior))
         return out
+
+
+def _requests(belief: Belief, pairs: Sequence[tuple[int, Motion]]) -> list[RolloutRequest]:
+    return [RolloutRequest(belief.particles[i], belief.states[i], m) for i, m in pairs]
 
 
 def best_of(scored: Sequence[Scored]) -> Scored | None:
