@@ -26,6 +26,8 @@ import statistics
 import tempfile
 from pathlib import Path
 
+import ray
+from cpu_split import GROUPS, TimedBackend, cpu_seconds, serial_bound, spent
 from planning import SETTINGS  # benchmarks/planning.py: name -> (task, uncertainty)
 
 from bilba_dist.planning.bilba import plan
@@ -37,23 +39,35 @@ from workers.pool import RayPool
 from workers.rollout_worker import RolloutWorker
 
 
-def one_plan(name: str, bound: str, seeds: int) -> dict[str, list[float]]:
+def one_plan(name: str, bound: str, seeds: int) -> tuple[dict[str, list[float]], dict]:
     """Per seed, the plan in-process, on 1 actor and on 2, back to back: the VM's load drifts
-    over minutes, and interleaving gives each ratio the same moment."""
+    over minutes, and interleaving gives each ratio the same moment. Also, per backend over
+    all seeds: the wall time with no rollout batch in flight (serial) and, on Ray, the CPU
+    seconds of the driver, the actors and Ray's own processes."""
     task = load_task(name, [bound])
     times: dict[str, list[float]] = {"in-process": [], "1 actor": [], "2 actors": []}
+    split = {k: {"wall": 0.0, "serial": 0.0, **dict.fromkeys(GROUPS, 0.0)} for k in times}
     local = RolloutWorker(task, "panda")
     with ray_session(2, None):
         two = RayPool(task, 2)  # one instance with 2 CPUs: the 1-actor pool is its first
+        pids = set(ray.get([actor.pid.remote() for actor in two.actors]))
         backends = {"in-process": local, "1 actor": two.first(1), "2 actors": two}
         for backend in backends.values():
             plan(task, backend, seed=99, timeout_s=10)  # warm: worlds built, imports done
+        two.guessed = two.guessed_used = 0
         for seed in range(seeds):
             for name, backend in backends.items():
-                times[name].append(plan(task, backend, seed=seed).planning_time_s)
+                timed, before = TimedBackend(backend), cpu_seconds(pids)
+                wall = plan(task, timed, seed=seed).planning_time_s
+                times[name].append(wall)
+                for group, cpu in spent(before, cpu_seconds(pids)).items():
+                    split[name][group] += cpu
+                split[name]["wall"] += wall
+                split[name]["serial"] += wall - timed.inside_s
+        split["guessed"] = {"submitted": two.guessed, "used": two.guessed_used}
         two.close()
     local.close()
-    return times
+    return times, split
 
 
 def batch(job_seeds: int) -> dict[int, float]:
@@ -70,6 +84,32 @@ def batch(job_seeds: int) -> dict[int, float]:
     return elapsed
 
 
+def print_split(splits: dict[str, dict], rows: dict[str, dict]) -> None:
+    """Where the time went, summed over the seeds: wall, serial (no batch in flight), CPU by
+    process group, and the share of the 2 cores' capacity that was used."""
+    print(
+        f"{'setting':<10}{'backend':<10}{'wall s':>8}{'serial s':>9}{'driver CPU':>11}"
+        f"{'actors CPU':>11}{'Ray CPU':>8}{'cores busy':>11}"
+    )
+    for setting, split in splits.items():
+        for name in ("1 actor", "2 actors"):
+            s = split[name]
+            busy = sum(s[g] for g in GROUPS) / (2 * s["wall"])
+            print(
+                f"{setting:<10}{name:<10}{s['wall']:>8.2f}{s['serial']:>9.2f}"
+                f"{s['driver']:>11.2f}{s['actors']:>11.2f}{s['ray']:>8.2f}{100 * busy:>10.0f}%"
+            )
+        r, guessed = rows[setting], split["guessed"]
+        print(
+            f"  {setting}, 2 actors: {guessed['submitted']} rollouts prefetched on idle actors, "
+            f"{guessed['used']} of them used"
+        )
+        print(
+            f"  {setting}: {100 * r['serial_share_1_actor']:.1f} % of the 1-actor wall time had "
+            f"no rollout in flight, so 2 actors give at most {r['two_actor_bound']:.2f}x"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5)
@@ -78,14 +118,17 @@ def main() -> None:
     )
     parser.add_argument("--jobs-seeds", type=int, default=3)
     args = parser.parse_args()
-    rows = {}
+    rows, splits = {}, {}
     for setting in args.settings:
-        times = one_plan(*SETTINGS[setting], args.seeds)
+        times, splits[setting] = one_plan(*SETTINGS[setting], args.seeds)
         pairs = zip(times["1 actor"], times["2 actors"], times["in-process"], strict=True)
         ratios = [(one / two, one / local - 1) for one, two, local in pairs]
+        one = splits[setting]["1 actor"]
         rows[setting] = {
             "two_actor_speedup": statistics.median(r[0] for r in ratios),
             "ray_overhead": statistics.median(r[1] for r in ratios),
+            "serial_share_1_actor": one["serial"] / one["wall"],
+            "two_actor_bound": serial_bound(one["serial"], one["wall"]),
             **{f"{k.replace(' ', '_')}_median_s": statistics.median(v) for k, v in times.items()},
         }
     elapsed = batch(args.jobs_seeds)
@@ -104,6 +147,7 @@ def main() -> None:
             f"{100 * r['ray_overhead']:>+18.1f}%"
         )
     print("targets: 2 actors >= 1.8x one; Ray on 1 actor <= +10 % (medians of per-seed ratios)")
+    print_split(splits, rows)
     headline = rows.get("peg-x", next(iter(rows.values())))
     jobs = 2 * args.jobs_seeds
     print(
