@@ -2,7 +2,7 @@
 
 `RayPool` keeps every actor fed from one queue: the rollouts asked for first, then those the
 planner says it will probably ask for next (``prefetch``: the next chunk's screening
-rollouts), which an actor runs when the batch in hand leaves it idle — at the batch's tail,
+rollouts), one at a time on an actor the batch in hand leaves idle — at the batch's tail,
 and while the planner thinks between batches. A rollout depends only on its request (each
 world forgets its contacts at reset), so a result computed ahead is the one a later call
 would compute; results return in request order, and a seeded plan is the same in-process,
@@ -40,6 +40,7 @@ class RayPool:
         self._running: dict[Any, int] = {}  # task ref -> actor index, until it is seen done
         self._ahead: dict[int, tuple[RolloutRequest, Any, int]] = {}  # id(request) -> (request,
         # task ref, index in the task's group): submitted, not yet asked for
+        self._guess: Any = None  # the guessed rollout's task, while it may be running
         self.guessed = 0  # prefetched rollouts submitted ...
         self.guessed_used = 0  # ... and later asked for
 
@@ -64,7 +65,7 @@ class RayPool:
         taken = self._ahead.keys() | where.keys() | {id(r) for r in todo}
         spare = _unique(r for r in prefetch if id(r) not in taken)
         queue = deque([(group, True) for group in self._groups(todo)])
-        if len(self.actors) > 1:  # a guess runs only on an actor with nothing else to do
+        if len(self.actors) > 1:  # one actor is never idle at a tail: no guesses
             queue += [([request], False) for request in spare]
         while True:
             self._fill(queue, where)
@@ -86,14 +87,20 @@ class RayPool:
         return [requests[i : i + size] for i in range(0, len(requests), size)]
 
     def _fill(self, queue: deque, where: dict[int, tuple[Any, int]]) -> None:
-        """Submit queued groups, to the least loaded actor, while one has room."""
-        while queue and min(self._load) < (DEPTH if queue[0][1] else 1):
-            group, urgent = queue.popleft()
+        """Submit queued groups to the least loaded actor while one has room; a guess only
+        to an idle actor, one at a time (on a small machine a guess shares a core with the
+        planner or with a rollout that was asked for)."""
+        while queue and min(self._load) < DEPTH:
+            group, urgent = queue[0]
+            if not urgent and (min(self._load) > 0 or self._guess in self._running):
+                break
+            queue.popleft()
             index = self._load.index(min(self._load))
             ref = self.actors[index].simulate.remote(group)
             self._load[index] += 1
             self._running[ref] = index
-            self.guessed += 0 if urgent else len(group)
+            if not urgent:
+                self._guess, self.guessed = ref, self.guessed + len(group)
             for k, request in enumerate(group):
                 if urgent:
                     where[id(request)] = (ref, k)
