@@ -3,7 +3,7 @@
 Between two PyBullet calls each numpy call costs 2–4× what a warm micro-benchmark says
 (stepSimulation evicts the interpreter's caches), so the step's arithmetic — the gain
 product, the spring-wrench clip, gravity and the torque limits — is one compiled call
-(README, Benchmarks: rollouts)."""
+(benchmarks/HISTORY.md, Rollouts)."""
 
 import math
 

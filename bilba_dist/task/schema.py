@@ -132,12 +132,12 @@ class PlannerParams(Strict):
     # Surface samples are pushed inside the C-obs by a depth uniform up to this [m] (the
     # paper's "slightly inside"; 3 mm is ours, the paper gives no figure). Deeper presses
     # push harder along the contact's normal, which a slide that must beat friction needs
-    # (README, the puzzle).
+    # (benchmarks/HISTORY.md, the puzzle).
     setpoint_press_m: float = Field(default=0.003, ge=0)
     # Stop scoring sampled setpoints once this many in a row bring no better score, and go
     # on to the GP rounds (ours; 0, the default, scores every sample, as the authors do).
     # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); the puzzle keeps 0
-    # until enough runs choose (README, Benchmarks).
+    # until enough runs choose (benchmarks/HISTORY.md).
     sample_patience: int = Field(default=0, ge=0)
     # Before the full MakeContact, race the next contacts of up to this many schedules as
     # short as Dijkstra's (whose tie-break picks among them): race_chunks chunks of sampled
