@@ -10,7 +10,12 @@ it bounds the speed-up of one plan (Amdahl's law).
 import time
 from collections.abc import Collection, Sequence
 
-import psutil
+try:
+    import psutil
+except ImportError:  # the dev extra has it; the main install does not
+    raise SystemExit(
+        "psutil is missing (it comes with the dev extra): .venv/bin/pip install -e '.[dev]'"
+    ) from None
 
 from bilba_dist.rollout import RolloutBackend, RolloutRequest, RolloutResult
 

@@ -29,3 +29,30 @@ def test_planning_benchmark_refuses_a_negative_setting_in_one_line(flag, value, 
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if "error:" in line]
     assert errors == [f"planning.py: error: argument {flag}: must be 0 or more, got {shown}"]
+
+
+def test_scaling_without_psutil_says_how_to_get_it_in_one_line():
+    hide = "import sys; sys.modules['psutil'] = None; sys.path.insert(0, sys.argv[1]); "
+    run = subprocess.run(
+        [sys.executable, "-c", hide + "import cpu_split", str(BENCHMARKS)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 1
+    assert run.stderr.strip().splitlines() == [
+        "psutil is missing (it comes with the dev extra): .venv/bin/pip install -e '.[dev]'"
+    ]
+
+
+@pytest.mark.parametrize(
+    ("serial_s", "wall_s", "actors", "bound"),
+    [(0.0, 10.0, 2, 2.0), (10.0, 10.0, 2, 1.0), (1.0, 10.0, 2, 1 / 0.55), (2.0, 10.0, 4, 2.5)],
+)
+def test_serial_share_bounds_the_speedup_as_amdahl_says(
+    serial_s, wall_s, actors, bound, monkeypatch
+):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from cpu_split import serial_bound
+
+    assert serial_bound(serial_s, wall_s, actors) == pytest.approx(bound)
