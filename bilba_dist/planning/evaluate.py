@@ -67,12 +67,9 @@ class Evaluator:
         scored: list[Scored] = []
         best, idle = 0.0, 0
         batches = [candidates[s : s + self.chunk] for s in range(0, len(candidates), self.chunk)]
-        batches.append(list(then[: self.chunk]))
-        for k, batch in enumerate(batches[:-1]):
-            ahead = self._screen(belief, batches[k + 1])
-            chunk_scored = self._score_chunk(
-                belief, batch, self._screen(belief, batch), ahead, accept
-            )
+        for batch, upcoming in zip(batches, [*batches[1:], then[: self.chunk]], strict=True):
+            own, ahead = self._screen(belief, batch), self._screen(belief, upcoming)
+            chunk_scored = self._score_chunk(belief, batch, own, ahead, accept)
             for s in chunk_scored:
                 if s.posterior is not None:
                     on_scored(s)

@@ -98,19 +98,29 @@ def race(
     first schedule wins its first chunk, the draws and the motion are those MakeContact
     would have made without a race."""
     chunk, drawn = search.evaluator.chunk, list[list[Candidate]]()
-    steps = [(r, j) for r in range(search.race_chunks) for j in range(len(schedules))]
-    for (round_, j), upcoming in zip(steps, [*steps[1:], None], strict=True):
+
+    def chunk_of(at: tuple[int, int] | None) -> list[Candidate]:
+        """Round r's chunk of schedule j's setpoints (``at`` = (r, j)); none where they are
+        not drawn yet."""
+        if at is None or at[1] >= len(drawn):
+            return []
+        round_, j = at
+        return drawn[j][round_ * chunk : (round_ + 1) * chunk]
+
+    turns = [(r, j) for r in range(search.race_chunks) for j in range(len(schedules))]
+    for at, upcoming in zip(turns, [*turns[1:], None], strict=True):
+        j = at[1]
         mode, accept = schedules[j][1], frozenset(schedules[j][1:])
         if j == len(drawn):
             on_start(j)
             drawn.append(sampled_candidates(search, belief, mode, rng)[1])
         _check(search)
-        batch = drawn[j][round_ * chunk : (round_ + 1) * chunk]
-        then = []  # the next step's chunk, where its setpoints are drawn already
-        if upcoming is not None and upcoming[1] < len(drawn):
-            then = drawn[upcoming[1]][upcoming[0] * chunk : (upcoming[0] + 1) * chunk]
         scored, winner = search.evaluator.score(
-            belief, batch, accept, _recording(search, mode, belief), then=then
+            belief,
+            chunk_of(at),
+            accept,
+            _recording(search, mode, belief),
+            then=chunk_of(upcoming),
         )
         _report(search, mode, winner or best_of(scored))
         if winner is not None and winner.posterior is not None:
