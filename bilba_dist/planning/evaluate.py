@@ -67,7 +67,8 @@ class Evaluator:
         scored: list[Scored] = []
         best, idle = 0.0, 0
         batches = [candidates[s : s + self.chunk] for s in range(0, len(candidates), self.chunk)]
-        for batch, upcoming in zip(batches, [*batches[1:], then[: self.chunk]], strict=True):
+        upcoming_batches = [*batches[1:], then[: self.chunk]][: len(batches)]
+        for batch, upcoming in zip(batches, upcoming_batches, strict=True):
             own, ahead = self._screen(belief, batch), self._screen(belief, upcoming)
             chunk_scored = self._score_chunk(belief, batch, own, ahead, accept)
             for s in chunk_scored:
