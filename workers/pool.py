@@ -73,7 +73,8 @@ class RayPool:
             if not urgent_left and all(ref not in self._running for ref, _ in where.values()):
                 break
             self._reap()
-        done = {ref: self._ray.get(ref) for ref in {ref for ref, _ in where.values()}}
+        refs = list({ref for ref, _ in where.values()})
+        done = dict(zip(refs, self._ray.get(refs), strict=True))
         return [done[where[id(r)][0]][where[id(r)][1]] for r in requests]
 
     def _groups(self, requests: list[RolloutRequest]) -> list[list[RolloutRequest]]:
@@ -99,13 +100,11 @@ class RayPool:
             ref = self.actors[index].simulate.remote(group)
             self._load[index] += 1
             self._running[ref] = index
-            if not urgent:
+            if urgent:
+                where.update((id(request), (ref, k)) for k, request in enumerate(group))
+            else:
                 self._guess, self.guessed = ref, self.guessed + len(group)
-            for k, request in enumerate(group):
-                if urgent:
-                    where[id(request)] = (ref, k)
-                else:
-                    self._ahead[id(request)] = (request, ref, k)
+                self._ahead.update((id(r), (r, ref, k)) for k, r in enumerate(group))
 
     def _reap(self) -> None:
         """Wait for at least one task in flight to finish; forget every one that has."""
