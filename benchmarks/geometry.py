@@ -33,7 +33,7 @@ def measure(name: str, repeats: int) -> dict[str, float]:
     for _ in range(repeats):
         t0 = time.perf_counter()
         cslice = CObsSlice.build(task.environment, task.manipuland, poses[0].rotation)
-        _ = cslice.vertex_contacts
+        _ = cslice.vertex_modes
         t1 = time.perf_counter()
         graph = build_mode_graph(cslice, positions, task.goal, graph_params(task))
         graph.schedule()

@@ -130,6 +130,32 @@ def test_peg_goal_region_has_vertices_only_where_three_polytopes_meet(peg):
         assert len({p.env_piece for p in touching}) >= 3
 
 
+def test_a_box_corner_keeps_all_three_modes(box_slice):
+    """Every mode at a single box's corner has a face of the slice there."""
+    assert box_slice.vertex_modes == box_slice.vertex_contacts
+    assert all(len(modes) == 3 for modes in box_slice.vertex_modes)
+
+
+def test_modes_that_touch_a_vertex_only_edge_to_edge_are_left_out(puzzle):
+    """The puzzle's goal pair (neck/+y on bar_py/-y) occurs on the slot's four corners and,
+    edge to edge, at the frame's outer corners (x = ±80.25 mm), where the neck's face meets
+    only the end of the bar's: only the slot's corners lie on the goal's region."""
+    cslice = CObsSlice.build(puzzle.environment, puzzle.manipuland, np.eye(3))
+    touching = np.array(
+        [
+            v
+            for v, c in zip(cslice.vertices, cslice.vertex_contacts, strict=True)
+            if puzzle.goal in c
+        ]
+    )
+    assert np.isclose(np.abs(touching[:, 0]), 0.08025).sum() >= 4
+    region = cslice.mode_vertices(puzzle.goal)
+    assert len(region) == 4
+    assert np.allclose(np.abs(region[:, 0]), 0.00025) and np.allclose(region[:, 1], 0.0155)
+    for modes, contacts in zip(cslice.vertex_modes, cslice.vertex_contacts, strict=True):
+        assert modes <= contacts
+
+
 def signed_distance(task, X_OM: pin.SE3) -> float:
     """Exact signed distance between the two parts (coal): < 0 when they overlap."""
     request = coal.DistanceRequest()

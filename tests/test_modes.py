@@ -26,6 +26,18 @@ def test_peg_schedule_goes_through_a_chamfer_or_wall_to_the_hole_bottom(setting)
     assert any(m.env.split("/")[1] in ("chamfer", "inner") for m in middle)
 
 
+def test_puzzle_goal_is_reached_only_from_inside_the_frame(puzzle):
+    """Its neighbours are the slot's walls, the bar above the lower block and the rail: no
+    face of the frame's outside (where the goal pair touches only edge to edge)."""
+    graph, _ = belief_graph(puzzle, initial_belief(puzzle), puzzle.X_WG0, SliceCache(puzzle))
+    assert set(graph.graph.predecessors(puzzle.goal)) == {
+        ContactPair("bar_mx/+x", "neck/-x"),
+        ContactPair("bar_px/-x", "neck/+x"),
+        ContactPair("bar_py/-z", "lower/+z"),
+        ContactPair("rail/+z", "lower/-z"),
+    }
+
+
 def test_puzzle_schedule_reaches_the_goal(puzzle):
     _, schedule = belief_graph(puzzle, initial_belief(puzzle), puzzle.X_WG0, SliceCache(puzzle))
     assert schedule[0] == FREE and schedule[-1] == puzzle.goal and len(schedule) >= 3

@@ -277,7 +277,7 @@ def test_race_finds_a_first_contact_that_holds_a_spread_belief():
     worker = RolloutWorker(task, "panda")
     schedules, won, rollouts = _first_contact(task, worker, 0, 3)
     worker.close()
-    assert schedules[0][1] == ContactPair("wall_mx/chamfer", "peg/-x")
+    assert schedules[0][1].env == "wall_mx/chamfer"
     assert won is not None
     j, outcome = won
     assert j > 0 and outcome.success and len(outcome.steps) == 1

@@ -18,6 +18,13 @@ from bilba_dist.geometry.piece import Part
 
 INSIDE, BOUNDARY, OUTSIDE = -1, 0, 1
 
+#: How far from a boundary vertex the probes of its modes' regions lie [m]: far above TOL,
+#: far below the smallest clearance of the built-in tasks (0.25 mm).
+PROBE_M = 1e-5
+#: Probe directions in each facet's plane: 12, each 15° off the plane's axes, so that on the
+#: mostly axis-aligned faces of these parts no probe runs along an edge of a region.
+PROBE_ANGLES = (np.arange(12) + 0.5) * np.pi / 6
+
 
 @dataclass(frozen=True)
 class CObsSlice:
@@ -50,6 +57,32 @@ class CObsSlice:
     def vertex_contacts(self) -> tuple[ContactSet, ...]:
         """The contact set of each boundary vertex."""
         return self.contacts(self.vertices)
+
+    @cached_property
+    def vertex_modes(self) -> tuple[ContactSet, ...]:
+        """Per boundary vertex, the modes of its contact set whose region has area next to it.
+
+        A mode can touch a vertex along a line or at a point only, where two faces meet edge
+        to edge: the puzzle's goal pair (neck on the frame's inner bar face) "occurs" at the
+        frame's outer corners that way, and an edge through such a vertex would be a contact
+        transition no motion can make. Each mode is kept only if a probe ``PROBE_M`` from the
+        vertex, in the plane of a facet through it, lies on that mode's region."""
+        V = self.vertices
+        if len(V) == 0:
+            return ()
+        facet = self.stack.facet_slack(V)
+        per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
+        through = (np.abs(facet) <= TOL) & (per_polytope[:, self.stack.owner] <= TOL)
+        vertex, f = np.nonzero(through)
+        e1, e2 = _plane_axes(self.stack.A[f])
+        directions = np.cos(PROBE_ANGLES)[None, :, None] * e1[:, None, :]
+        directions += np.sin(PROBE_ANGLES)[None, :, None] * e2[:, None, :]
+        probes = V[vertex][:, None, :] + PROBE_M * directions
+        nearby: list[set[ContactPair]] = [set() for _ in V]
+        owner = np.repeat(vertex, len(PROBE_ANGLES))
+        for k, contacts in zip(owner, self.contacts(probes.reshape(-1, 3)), strict=True):
+            nearby[k] |= contacts
+        return tuple(frozenset(c & n) for c, n in zip(self.vertex_contacts, nearby, strict=True))
 
     @cached_property
     def _facet_labels(self) -> tuple[ContactSet, ...]:
@@ -131,12 +164,21 @@ class CObsSlice:
         return np.concatenate(found)[:n]
 
     def mode_vertices(self, mode: ContactPair) -> np.ndarray:
-        """The boundary vertices whose contact set holds ``mode``."""
-        mask = np.array([mode in c for c in self.vertex_contacts], dtype=bool)
+        """The boundary vertices at the edge of ``mode``'s region (see ``vertex_modes``)."""
+        mask = np.array([mode in c for c in self.vertex_modes], dtype=bool)
         return self.vertices[mask] if len(mask) else np.zeros((0, 3))
 
     def modes(self) -> set[ContactPair]:
         return set().union(*self.vertex_contacts) if self.vertex_contacts else set()
+
+
+def _plane_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit vectors spanning the plane of each unit normal: e1 = n × (the axis least
+    along n), e2 = n × e1."""
+    axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
+    e1 = np.cross(normals, axis)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(normals, e1)
 
 
 def _fan(

@@ -109,7 +109,7 @@ def build_mode_graph(
     cslice: CObsSlice, positions: np.ndarray, goal: ContactPair, params: GraphParams
 ) -> ModeGraph:
     """The mode graph of ``cslice`` weighted for particles at ``positions`` (N, 3) in O."""
-    counts = Counter(mode for contacts in cslice.vertex_contacts for mode in contacts)
+    counts = Counter(mode for contacts in cslice.vertex_modes for mode in contacts)
     modes = sorted(m for m, c in counts.items() if c >= params.min_mode_vertices or m == goal)
     normals = {m: mode_normal(cslice, m) for m in modes}
     u = uncertainty_direction(positions)
@@ -120,7 +120,7 @@ def build_mode_graph(
     kept = set(modes)
     pairs = {
         tuple(sorted(pair))
-        for contacts in cslice.vertex_contacts
+        for contacts in cslice.vertex_modes
         for pair in combinations(sorted(contacts & kept), 2)
     }
     if params.near_edge_m > 0:
