@@ -64,6 +64,19 @@ def test_pruning_a_failed_edge_changes_the_schedule(peg):
     assert len(seen) >= 2
 
 
+def test_restore_puts_back_every_pruned_edge(peg):
+    graph, schedule = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))
+    edges = dict(graph.graph.edges)
+    for v in list(graph.graph.successors(FREE)):
+        graph.prune(FREE, v)
+    assert not graph.has_schedule()
+    graph.restore()
+    assert graph.has_schedule() and graph.schedule() == schedule
+    assert dict(graph.graph.edges) == edges
+    graph.restore()  # nothing pruned since: no change
+    assert dict(graph.graph.edges) == edges
+
+
 def test_pruning_every_edge_out_of_free_leaves_no_schedule(peg):
     graph, _ = belief_graph(peg, initial_belief(peg), peg.X_WG0, SliceCache(peg))
     for v in list(graph.graph.successors(FREE)):

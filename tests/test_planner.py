@@ -153,6 +153,36 @@ def test_running_out_of_attempts_says_so():
     assert result.reason.startswith("all 2 attempts failed (2 edges pruned); last: no motion")
 
 
+def test_pruning_rounds_put_pruned_edges_back():
+    """Free joined to one mode only, and MakeContact too cheap to go far: pruning empties
+    the graph. A second round puts the pruned edges back and prunes again from there."""
+    from bilba_dist.task.loader import build_task
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    results = []
+    for rounds in (1, 2):
+        cheap = {
+            "n_free": 1,
+            "prune_rounds": rounds,
+            "setpoints_per_particle": 1,
+            "noisy_setpoints": 0,
+            "gp_rounds": 0,
+        }
+        planner = task.spec.planner.model_copy(update=cheap)
+        spec = task.spec.model_copy(update={"planner": planner})
+        worker = RolloutWorker(spec, "panda")
+        results.append(plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0))
+        worker.close()
+    one, two = results
+    assert not one.success and not two.success
+    assert (one.rounds, two.rounds) == (1, 2)
+    n = len(one.pruned)
+    assert two.pruned[:n] == one.pruned and len(two.pruned) > n
+    assert set(two.pruned[n:]) & set(one.pruned)  # an edge pruned, put back, pruned again
+    assert one.reason.startswith(f"edges pruned until no schedule was left ({n} pruned); ")
+    assert f"({len(two.pruned)} pruned in 2 rounds); last: no motion" in two.reason
+
+
 def test_start_state_puts_the_gripper_at_the_start_pose(peg):
     from bilba_dist.robot.panda import PandaModel
 

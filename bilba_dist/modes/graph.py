@@ -44,6 +44,7 @@ class ModeGraph:
         self.graph = graph
         self.goal = goal
         self.delta_proj = delta_proj
+        self._pruned: list[tuple[ContactPair, ContactPair, dict]] = []
 
     def reweight(self, positions: np.ndarray) -> None:
         """Recompute every edge cost for a belief whose particles are at ``positions``."""
@@ -93,7 +94,16 @@ class ModeGraph:
     def prune(self, u: ContactPair, v: ContactPair) -> None:
         """Remove the edge u → v (a transition that failed)."""
         if self.graph.has_edge(u, v):
+            self._pruned.append((u, v, self.graph.edges[u, v]))
             self.graph.remove_edge(u, v)
+
+    def restore(self) -> None:
+        """Put back every pruned edge (costs as they were when pruned; ``reweight`` after)."""
+        self.graph.add_edges_from(self._pruned)
+        self._pruned.clear()
+
+    def has_schedule(self, start: ContactPair = FREE) -> bool:
+        return self.goal in self.graph and nx.has_path(self.graph, start, self.goal)
 
     def to_dot(self) -> str:
         lines = ["digraph modes {", "  rankdir=LR;"]

@@ -88,8 +88,9 @@ def plan(
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         _attempts(task, graph, b0, search, rng, result, panda)
     except NoScheduleError as exc:
+        rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
-            f"edges pruned until no schedule was left ({len(result.pruned)} pruned); "
+            f"edges pruned until no schedule was left ({len(result.pruned)} pruned{rounds}); "
             f"last: {result.reason}"
             if result.pruned
             else f"no contact schedule: {exc}"
@@ -164,9 +165,13 @@ def _attempts(
     result: PlanResult,
     panda: PandaModel,
 ) -> None:
-    for attempt in range(task.spec.planner.n_attempts):
+    params = task.spec.planner
+    for attempt in range(params.n_attempts):
         result.attempts = attempt + 1
         belief, mode, steps = b0, FREE, []
+        if result.rounds < params.prune_rounds and not graph.has_schedule():
+            graph.restore()
+            result.rounds += 1
         graph.reweight(_positions(belief))
         while True:
             schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)

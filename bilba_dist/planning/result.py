@@ -34,6 +34,7 @@ class PlanResult:
     planning_time_s: float = 0.0
     rollouts: int = 0
     attempts: int = 0
+    rounds: int = 1  # of pruning (planner.prune_rounds)
     schedules: list[list[ContactPair]] = field(default_factory=list)
     pruned: list[tuple[ContactPair, ContactPair]] = field(default_factory=list)
     final_belief: Belief | None = None

@@ -125,6 +125,10 @@ class PlannerParams(Strict):
     # graph; the puzzle sets 0.6 mm, just over its 0.5 mm side clearances; README).
     near_edge_m: float = Field(default=0.0, ge=0)
     n_attempts: int = Field(default=50, ge=1)
+    # When pruning has left no schedule from free, put the pruned edges back and go on, up
+    # to this many rounds in all (ours; 1, the default, stops there, as the authors do).
+    # MakeContact samples: an edge it failed once may work from a later belief or draw.
+    prune_rounds: int = Field(default=1, ge=1)
     timeout_s: float = Field(default=900.0, gt=0)
     setpoints_per_particle: int = Field(default=32, ge=1)
     noisy_setpoints: int = Field(default=32, ge=0)
