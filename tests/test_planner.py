@@ -16,7 +16,7 @@ from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.plan.file import plan_document, read_plan, write_plan
 from bilba_dist.plan.replay import replay
 from bilba_dist.planning.bilba import furthest_common, plan
-from bilba_dist.planning.result import PlanResult
+from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
 from bilba_dist.task.loader import load_task
@@ -107,10 +107,55 @@ def test_plan_file_replays_to_the_same_contacts(pitch_plan, tmp_path):
     assert document["task"]["hash"] == task.hash and document["success"] is True
     for written, read in zip(result.motions, loaded.motions, strict=True):
         assert np.array_equal(written.K, read.K)
-        assert np.allclose(written.G_d.homogeneous, read.G_d.homogeneous, atol=1e-12)
+        assert np.array_equal(written.G_d.homogeneous, read.G_d.homogeneous)
         assert read.contact == written.contact
     final = replay(task, loaded.motions, initial_belief(task), worker)
     assert final.contacts == result.final_belief.contacts
+
+
+def _one_motion_plan(tmp_path, R: np.ndarray):
+    """A plan file of one motion whose setpoint has rotation ``R``."""
+    motion = PlannedMotion(
+        VERY_STIFF, pin.SE3(R, np.array([0.5, 0.0, 0.3])), np.zeros(7), 5.0, FREE, 0.0
+    )
+    task = load_task("peg-in-hole")
+    result = PlanResult(True, "", [motion], "bilba-fixed", 0)
+    path = tmp_path / "plan.json"
+    write_plan(plan_document(result, task), path)
+    return path
+
+
+def test_plan_file_keeps_the_simulated_rotation_exactly(tmp_path):
+    """A setpoint rotation a little off orthonormal (as composed poses are) reads back bit
+    for bit; through the quaternion alone it would not."""
+    R = pin.rpy.rpyToMatrix(np.pi, 0.1, 0.2) + 3e-12 * np.eye(3)
+    path = _one_motion_plan(tmp_path, R)
+    (read,) = read_plan(path).motions
+    assert np.array_equal(read.G_d.rotation, R)
+    document = json.loads(path.read_text())
+    del document["motions"][0]["G_d"]["rotation"]  # a plan file written before the matrix
+    path.write_text(json.dumps(document))
+    (old,) = read_plan(path).motions
+    assert np.allclose(old.G_d.rotation, R, atol=1e-9) and not np.array_equal(old.G_d.rotation, R)
+
+
+@pytest.mark.parametrize(
+    ("rotation", "message"),
+    [
+        ([[1, 0, 0], [0, 1, 0]], "must be a 3x3 rotation matrix"),
+        ([[2, 0, 0], [0, 1, 0], [0, 0, 1]], "must be a 3x3 rotation matrix"),
+        ([[1, 0, 0], [0, -1, 0], [0, 0, -1]], "rotation and quat_xyzw disagree"),
+    ],
+)
+def test_validate_rejects_a_bad_setpoint_rotation(rotation, message, tmp_path):
+    register()
+    path = _one_motion_plan(tmp_path, np.eye(3))
+    document = json.loads(path.read_text())
+    document["motions"][0]["G_d"]["rotation"] = rotation
+    path.write_text(json.dumps(document))
+    result = CliRunner().invoke(cli, ["validate", str(path), "--workers", "0"])
+    assert result.exit_code == 2
+    assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
 
 def test_plan_motion_setpoints_are_reachable_joint_targets(pitch_plan):

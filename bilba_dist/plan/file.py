@@ -1,7 +1,8 @@
 """The plan file: versioned JSON holding everything needed to run the motions on a Panda
 without the planner — per motion K (6×6, rotation first, world axes), G_d (xyz and quaternion
-xyzw, world frame), q_d (7 joints), timeout, the contact it should reach, and its score —
-plus the task (name, hash, uncertainty), planner, seed, parameters and planning time."""
+xyzw, world frame, plus the rotation matrix exactly as simulated), q_d (7 joints), timeout,
+the contact it should reach, and its score — plus the task (name, hash, uncertainty),
+planner, seed, parameters and planning time."""
 
 import json
 from dataclasses import dataclass
@@ -19,6 +20,8 @@ from bilba_dist.task.loader import Task
 
 FORMAT = "bilba-plan"
 VERSION = 1
+#: How far a G_d rotation may be from orthonormal, or from its quaternion, in a plan file.
+ROTATION_TOL = 1e-6
 
 
 def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
@@ -47,7 +50,11 @@ def _motion(m: PlannedMotion) -> dict[str, Any]:
     quat = pin.Quaternion(m.G_d.rotation).coeffs()  # x, y, z, w
     return {
         "K": np.asarray(m.K).tolist(),
-        "G_d": {"xyz": m.G_d.translation.tolist(), "quat_xyzw": quat.tolist()},
+        "G_d": {
+            "xyz": m.G_d.translation.tolist(),
+            "quat_xyzw": quat.tolist(),
+            "rotation": m.G_d.rotation.tolist(),
+        },
         "q_d": np.asarray(m.q_d).tolist(),
         "timeout_s": m.timeout_s,
         "contact": {"env": m.contact.env, "manip": m.contact.manip},
@@ -108,10 +115,24 @@ def _read_motion(m: dict[str, Any]) -> PlannedMotion:
     K = np.array(m["K"], dtype=float)
     if K.shape != (6, 6):
         raise ValueError(f"K must be 6x6, got {K.shape}")
-    quat = pin.Quaternion(np.array(m["G_d"]["quat_xyzw"], dtype=float))  # x, y, z, w
-    quat.normalize()
-    G_d = pin.SE3(quat.matrix(), np.array(m["G_d"]["xyz"], dtype=float))
+    G_d = pin.SE3(_rotation(m["G_d"]), np.array(m["G_d"]["xyz"], dtype=float))
     contact = ContactPair(str(m["contact"]["env"]), str(m["contact"]["manip"]))
     return PlannedMotion(
         K, G_d, np.array(m["q_d"], dtype=float), float(m["timeout_s"]), contact, float(m["score"])
     )
+
+
+def _rotation(G_d: dict[str, Any]) -> np.ndarray:
+    """G_d's rotation: the stored matrix where there is one (the quaternion's round trip
+    moves it by up to ~1e-11, and the puzzle's 0.25 mm clearances turn a 1e-9 m change of
+    setpoint into a different contact), else the quaternion's; both must agree."""
+    quat = pin.Quaternion(np.array(G_d["quat_xyzw"], dtype=float))  # x, y, z, w
+    quat.normalize()
+    if "rotation" not in G_d:
+        return quat.matrix()
+    R = np.array(G_d["rotation"], dtype=float)
+    if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=ROTATION_TOL):
+        raise ValueError("G_d rotation must be a 3x3 rotation matrix")
+    if not np.allclose(R, quat.matrix(), atol=ROTATION_TOL):
+        raise ValueError("G_d rotation and quat_xyzw disagree")
+    return R
