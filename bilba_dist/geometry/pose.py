@@ -6,6 +6,7 @@ Translations are in metres, angles in radians.
 """
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -44,3 +45,17 @@ def transform_points(X: pin.SE3, points: np.ndarray) -> np.ndarray:
 def rotation_key(R: np.ndarray, decimals: int = 9) -> bytes:
     """A hashable key of a rotation, equal for rotations that agree to ``decimals``."""
     return (np.round(np.asarray(R, dtype=float), decimals) + 0.0).tobytes()
+
+
+def pose_json(X: pin.SE3) -> dict[str, Any]:
+    """``X`` as JSON: ``xyz`` and ``quat_xyzw``."""
+    return {
+        "xyz": X.translation.tolist(),
+        "quat_xyzw": pin.Quaternion(X.rotation).coeffs().tolist(),
+    }
+
+
+def setpoint_json(X: pin.SE3) -> dict[str, Any]:
+    """A motion's setpoint as JSON: ``pose_json`` plus ``rotation``, the 3×3 matrix exactly
+    as simulated (the quaternion's round trip can move it by ~1e-11; plan/file.py)."""
+    return {**pose_json(X), "rotation": X.rotation.tolist()}

@@ -15,6 +15,7 @@ import pinocchio as pin
 from bilba_dist import __version__
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.pose import setpoint_json
 from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.task.loader import Task
 
@@ -47,14 +48,9 @@ def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
 
 
 def _motion(m: PlannedMotion) -> dict[str, Any]:
-    quat = pin.Quaternion(m.G_d.rotation).coeffs()  # x, y, z, w
     return {
         "K": np.asarray(m.K).tolist(),
-        "G_d": {
-            "xyz": m.G_d.translation.tolist(),
-            "quat_xyzw": quat.tolist(),
-            "rotation": m.G_d.rotation.tolist(),
-        },
+        "G_d": setpoint_json(m.G_d),
         "q_d": np.asarray(m.q_d).tolist(),
         "timeout_s": m.timeout_s,
         "contact": {"env": m.contact.env, "manip": m.contact.manip},

@@ -4,13 +4,21 @@ from typing import Any
 
 VEC = {"type": "array", "items": {"type": "number"}}
 CONTACT = {"type": "array", "items": {"type": "string"}, "minItems": 2, "maxItems": 2}
-POSE = {
+POSE_PROPERTIES: dict[str, Any] = {
+    "xyz": {**VEC, "minItems": 3, "maxItems": 3},
+    "quat_xyzw": {**VEC, "minItems": 4, "maxItems": 4},
+}
+POSE = {"type": "object", "properties": POSE_PROPERTIES, "required": ["xyz", "quat_xyzw"]}
+ROTATION = {
+    "type": "array",
+    "items": {**VEC, "minItems": 3, "maxItems": 3},
+    "minItems": 3,
+    "maxItems": 3,
+}
+SETPOINT = {  # a motion's G_d: the pose and its rotation matrix exactly as simulated
     "type": "object",
-    "properties": {
-        "xyz": {**VEC, "minItems": 3, "maxItems": 3},
-        "quat_xyzw": {**VEC, "minItems": 4, "maxItems": 4},
-    },
-    "required": ["xyz", "quat_xyzw"],
+    "properties": {**POSE_PROPERTIES, "rotation": ROTATION},
+    "required": ["xyz", "quat_xyzw", "rotation"],
 }
 PARTICLE = {
     "type": "object",
@@ -26,7 +34,7 @@ MOTION = {
             "minItems": 6,
             "maxItems": 6,
         },
-        "G_d": POSE,
+        "G_d": SETPOINT,
         "timeout_s": {"type": "number"},
     },
     "required": ["K", "G_d", "timeout_s"],

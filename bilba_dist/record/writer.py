@@ -13,12 +13,12 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-import pinocchio as pin
 from mcap.writer import CompressionType, Writer
 
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.pose import pose_json, setpoint_json
 from bilba_dist.record.foxglove import SCHEMAS as FOXGLOVE_SCHEMAS
 from bilba_dist.record.foxglove import SceneMessages
 from bilba_dist.record.schemas import TOPICS
@@ -28,16 +28,9 @@ from bilba_dist.task.loader import Task
 PROFILE = "bilba"
 
 
-def pose(X: pin.SE3) -> dict[str, list[float]]:
-    return {
-        "xyz": X.translation.tolist(),
-        "quat_xyzw": pin.Quaternion(X.rotation).coeffs().tolist(),
-    }
-
-
 def particles(belief: Belief) -> list[dict[str, Any]]:
     return [
-        {"X_WM": pose(s.X_WM), "contacts": sorted([list(c) for c in contacts])}
+        {"X_WM": pose_json(s.X_WM), "contacts": sorted([list(c) for c in contacts])}
         for s, contacts in zip(belief.states, belief.contacts, strict=True)
     ]
 
@@ -130,7 +123,7 @@ class LogWriter:
                 "contact_sought": list(mode),
                 "motion": {
                     "K": np.asarray(motion.K).tolist(),
-                    "G_d": pose(motion.G_d),
+                    "G_d": setpoint_json(motion.G_d),
                     "timeout_s": motion.timeout_s,
                 },
                 "before": particles(before),
