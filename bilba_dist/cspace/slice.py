@@ -70,10 +70,7 @@ class CObsSlice:
         V = self.vertices
         if len(V) == 0:
             return ()
-        facet = self.stack.facet_slack(V)
-        per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
-        through = (np.abs(facet) <= TOL) & (per_polytope[:, self.stack.owner] <= TOL)
-        vertex, f = np.nonzero(through)
+        vertex, f = np.nonzero(self._on_facets(V)[1])
         e1, e2 = _plane_axes(self.stack.A[f])
         directions = np.cos(PROBE_ANGLES)[None, :, None] * e1[:, None, :]
         directions += np.sin(PROBE_ANGLES)[None, :, None] * e2[:, None, :]
@@ -97,10 +94,7 @@ class CObsSlice:
         """The contact set at each point: the labels of every facet it lies on, of every
         polytope it is on the boundary of; empty for points not on the slice's boundary."""
         points = np.atleast_2d(points)
-        facet = self.stack.facet_slack(points)
-        per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
-        on_union = per_polytope.min(axis=1) >= -TOL
-        on_facet = (np.abs(facet) <= TOL) & (np.abs(per_polytope[:, self.stack.owner]) <= TOL)
+        on_union, on_facet = self._on_facets(points)
         result: list[ContactSet] = []
         for i in range(len(points)):
             if not on_union[i]:
@@ -114,16 +108,18 @@ class CObsSlice:
 
     def in_mode(self, points: np.ndarray, mode: ContactPair) -> np.ndarray:
         """Whether each point lies on the boundary region of ``mode``."""
-        points = np.atleast_2d(points)
         labelled = np.array([mode in label for label in self._facet_labels], dtype=bool)
-        facet = self.stack.facet_slack(points)[:, labelled]
-        per_polytope = np.maximum.reduceat(
-            self.stack.facet_slack(points), self.stack.starts, axis=1
-        )
+        on_union, on_facet = self._on_facets(np.atleast_2d(points))
+        return on_union & on_facet[:, labelled].any(axis=1)
+
+    def _on_facets(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per point, whether it is on the union's boundary or outside it (N,), and which
+        facets it lies on, each on its own polytope's surface (N, F); within TOL."""
+        facet = self.stack.facet_slack(points)
+        per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
         on_union = per_polytope.min(axis=1) >= -TOL
-        owner_slack = per_polytope[:, self.stack.owner[labelled]]
-        on_facet = (np.abs(facet) <= TOL) & (np.abs(owner_slack) <= TOL)
-        return on_union & on_facet.any(axis=1)
+        on_facet = (np.abs(facet) <= TOL) & (np.abs(per_polytope[:, self.stack.owner]) <= TOL)
+        return on_union, on_facet
 
     def mode_facets(self, mode: ContactPair) -> list[tuple[int, int]]:
         """(polytope, facet) indices of every facet labelled with ``mode``."""
