@@ -164,9 +164,6 @@ class CObsSlice:
         mask = np.array([mode in c for c in self.vertex_modes], dtype=bool)
         return self.vertices[mask] if len(mask) else np.zeros((0, 3))
 
-    def modes(self) -> set[ContactPair]:
-        return set().union(*self.vertex_contacts) if self.vertex_contacts else set()
-
 
 def _plane_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors spanning the plane of each unit normal: e1 = n × (the axis least
