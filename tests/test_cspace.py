@@ -17,6 +17,7 @@ from bilba_dist.cspace.slice import BOUNDARY, INSIDE, OUTSIDE, CObsSlice
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.piece import Part, box_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
+from bilba_dist.task.loader import load_task
 
 ENV_HALF = np.array([0.2, 0.3, 0.1])
 MANIP_HALF = np.array([0.05, 0.04, 0.03])
@@ -81,6 +82,59 @@ def test_mode_samples_lie_on_the_mode_and_inside_when_pushed(box_slice):
     assert all(mode in c for c in box_slice.contacts(on))
     pushed = box_slice.sample_mode(mode, 50, rng, depth=1e-3)
     assert (box_slice.classify(pushed) == INSIDE).all()
+
+
+def test_a_sliver_region_of_a_large_facet_is_sampled_all_over():
+    """The puzzle's goal (neck on the far bar's inner face) is 0.5 × 1 mm of a facet of
+    about 160 × 42 mm: the neck fits the opening with 0.25 mm either side in x, and it faces
+    the bar only while the top block clears the bar (z ≥ 111 mm), the lower block passes
+    under it (z ≤ 113 mm) and rests on the rail (z ≥ 112 mm). Drawing on the facet and
+    rejecting what falls off the region found ~0.15 points in 2048."""
+    task = load_task("puzzle")
+    cslice = CObsSlice.build(task.environment, task.manipuland, np.eye(3))
+    points = cslice.sample_mode(task.goal, 200, np.random.default_rng(3))
+    assert len(points) == 200
+    assert all(task.goal in c for c in cslice.contacts(points))
+    x, y, z = points.T * 1000  # mm
+    assert np.allclose(y, 15.5)
+    assert x.min() >= -0.25 - 1e-6 and x.max() <= 0.25 + 1e-6 and np.ptp(x) > 0.45
+    assert z.min() >= 112 - 1e-6 and z.max() <= 113 + 1e-6 and np.ptp(z) > 0.9
+    triangles, _ = cslice.mode_triangles(task.goal)
+    area = 0.5 * np.linalg.norm(
+        np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1
+    )
+    assert area.sum() == pytest.approx(0.5e-3 * 1e-3, rel=1e-4)  # cut at −TOL: +2 nm a side
+
+
+def nearly_square_rotations(n: int) -> list[np.ndarray]:
+    """Seeded rotations, each a normal twist of 0.01 rad scaled by 1e-4, 1e-2 or 1."""
+    rng = np.random.default_rng(0)
+    return [pin.exp3(rng.normal(size=3) * 0.01 * rng.choice([1e-4, 1e-2, 1])) for _ in range(n)]
+
+
+@pytest.mark.parametrize("k, pieces", [(12, ("bar_py", "lower")), (20, ("bar_px", "neck"))])
+def test_mode_regions_of_nearly_square_rotations(k, pieces):
+    """Turned by micro-radians, a Minkowski facet is merged from nearly coplanar ones whose
+    corners lie ~1e-8 m off its plane and fold when projected; at these two rotations (of a
+    sweep of 30) that once made the polygon overlay raise. Every mode of the piece pair gets
+    its region, and points drawn there are on the mode."""
+    task = load_task("puzzle")
+    cslice = CObsSlice.build(task.environment, task.manipuland, nearly_square_rotations(k + 1)[k])
+    env, manip = pieces
+    modes = {
+        m
+        for p in cslice.polytopes
+        for label in p.labels
+        for m in label
+        if m.env.startswith(env + "/") and m.manip.startswith(manip + "/")
+    }
+    rng = np.random.default_rng(0)
+    sampled = 0
+    for mode in sorted(modes):
+        points = cslice.sample_mode(mode, 20, rng)
+        assert all(mode in c for c in cslice.contacts(points)), mode
+        sampled += len(points) > 0
+    assert sampled >= 6  # at least the six face-to-face modes of two boxes have area
 
 
 def brute_force_vertices(cslice: CObsSlice) -> np.ndarray:

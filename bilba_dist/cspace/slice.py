@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+import shapely
 
 from bilba_dist.cspace.boundary import FacetStack, boundary_vertices
 from bilba_dist.cspace.polytope import TOL, Polytope, minkowski_polytope
@@ -33,6 +34,10 @@ class CObsSlice:
     R_OM: np.ndarray
     polytopes: tuple[Polytope, ...]
     stack: FacetStack = field(repr=False)
+    #: Per mode, its region as triangles with their facet normals (see ``mode_triangles``).
+    _regions: dict[ContactPair, tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @classmethod
     def build(cls, environment: Part, manipuland: Part, R_OM: np.ndarray) -> "CObsSlice":
@@ -137,27 +142,37 @@ class CObsSlice:
         rng: np.random.Generator,
         depth: float | tuple[float, float] = 0.0,
     ) -> np.ndarray:
-        """Up to ``n`` points on the boundary region of ``mode`` (area-weighted over its
-        facets, rejecting points covered by another polytope); with ``depth`` > 0 each point
-        is then pushed that far inside, against its facet's normal [m] (a pair: a depth
-        uniform in that range, per point)."""
-        facets = self.mode_facets(mode)
-        if not facets:
+        """Up to ``n`` points uniform on the boundary region of ``mode`` (``mode_triangles``,
+        area-weighted); with ``depth`` > 0 each point is then pushed that far inside, against
+        its facet's normal [m] (a pair: a depth uniform in that range, per point)."""
+        triangles, normals = self.mode_triangles(mode)
+        if len(triangles) == 0:
             return np.zeros((0, 3))
-        triangles, normals = _fan(self.polytopes, facets)
         areas = 0.5 * np.linalg.norm(
             np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1
         )
-        found: list[np.ndarray] = []
-        for _ in range(8):
-            pick = rng.choice(len(triangles), size=4 * n, p=areas / areas.sum())
-            points = _in_triangles(triangles[pick], rng)
-            on = self.in_mode(points, mode)
-            d = rng.uniform(*depth, size=(int(on.sum()), 1)) if isinstance(depth, tuple) else depth
-            found.append(points[on] - d * normals[pick][on])
-            if sum(len(f) for f in found) >= n:
-                break
-        return np.concatenate(found)[:n]
+        pick = rng.choice(len(triangles), size=n, p=areas / areas.sum())
+        points = _in_triangles(triangles[pick], rng)
+        on = self.in_mode(points, mode)  # all but rounding at the region's edges
+        d = rng.uniform(*depth, size=(int(on.sum()), 1)) if isinstance(depth, tuple) else depth
+        return points[on] - d * normals[pick][on]
+
+    def mode_triangles(self, mode: ContactPair) -> tuple[np.ndarray, np.ndarray]:
+        """``mode``'s boundary region as (T, 3, 3) triangles and their facet normals (T, 3):
+        each facet labelled with it, less the interiors of the other polytopes, cut in the
+        facet's plane (Shapely) and triangulated. A region can be a sliver of its facet —
+        the puzzle's goal is 0.5 × 1 mm of a 160 × 42 mm facet — so points are drawn in the
+        region itself, not in the facet and then rejected."""
+        if mode not in self._regions:
+            found = [_facet_region(self.polytopes, i, f) for i, f in self.mode_facets(mode)]
+            triangles = [t for t, _ in found if len(t)]
+            normals = [m for t, m in found if len(t)]
+            self._regions[mode] = (
+                (np.concatenate(triangles), np.concatenate(normals))
+                if triangles
+                else (np.zeros((0, 3, 3)), np.zeros((0, 3)))
+            )
+        return self._regions[mode]
 
     def mode_vertices(self, mode: ContactPair) -> np.ndarray:
         """The boundary vertices at the edge of ``mode``'s region (see ``vertex_modes``)."""
@@ -174,17 +189,61 @@ def _plane_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(normals, e1)
 
 
-def _fan(
-    polytopes: Iterable[Polytope], facets: list[tuple[int, int]]
-) -> tuple[np.ndarray, np.ndarray]:
-    polytopes = list(polytopes)
-    triangles, normals = [], []
-    for i, f in facets:
-        ring = polytopes[i].polygons[f]
-        for k in range(1, len(ring) - 1):
-            triangles.append([ring[0], ring[k], ring[k + 1]])
-            normals.append(polytopes[i].A[f])
-    return np.array(triangles), np.array(normals)
+def _facet_region(polytopes: tuple[Polytope, ...], i: int, f: int) -> tuple[np.ndarray, np.ndarray]:
+    """Facet ``f`` of polytope ``i`` less every other polytope's interior (slack below
+    −TOL, as ``classify`` has it), as triangles in 3-D and their normals."""
+    polytope = polytopes[i]
+    ring, normal = polytope.polygons[f], polytope.A[f]
+    e1, e2 = _plane_axes(normal[None, :])
+    axes = np.vstack([e1, e2])  # (2, 3): plane coordinates w ↦ origin + w @ axes
+    # On the facet's plane itself: the hull's corners of a facet merged from nearly coplanar
+    # ones lie up to ~1e-8 m off it, and points drawn there would not count as on it.
+    origin = ring[0] - (normal @ ring[0] - polytope.b[f]) * normal
+    # ... and projected, such a ring can fold by a nanometre: its convex hull is the facet.
+    hull = shapely.convex_hull(shapely.MultiPoint((ring - origin) @ axes.T))
+    if not isinstance(hull, shapely.Polygon):
+        return np.zeros((0, 3, 3)), np.zeros((0, 3))
+    face = np.asarray(hull.exterior.coords)[:-1]
+    lower, upper = ring.min(axis=0) - TOL, ring.max(axis=0) + TOL
+    cuts = []
+    for j, other in enumerate(polytopes):
+        if j == i or np.any(other.lower > upper) or np.any(other.upper < lower):
+            continue
+        inside = _clip(face, other.A @ axes.T, other.b - other.A @ origin - TOL)
+        cut = shapely.convex_hull(shapely.MultiPoint(inside))  # convex, up to rounding
+        if isinstance(cut, shapely.Polygon):
+            cuts.append(cut)
+    # Snap-rounded to a TOL grid: exact floating-point overlay of these nearly coincident
+    # polygons (slivers, corners a nanometre apart) can raise GEOS topology errors.
+    region = shapely.set_precision(hull, TOL)
+    if cuts:
+        covered = shapely.union_all(shapely.set_precision(cuts, TOL), grid_size=TOL)
+        region = shapely.difference(region, covered, grid_size=TOL)
+    parts = shapely.get_parts(shapely.constrained_delaunay_triangles(region))
+    # Slivers (a region that meets a facet only along a line, left as triangles a rounding
+    # error wide) are not area to sample: under a PROBE_M square, as ``vertex_modes`` has it.
+    parts = parts[shapely.area(parts) >= PROBE_M**2]
+    flat = np.array([np.asarray(t.exterior.coords)[:3] for t in parts]).reshape(-1, 3, 2)
+    return origin + flat @ axes, np.repeat(normal[None, :], len(flat), axis=0)
+
+
+def _clip(polygon: np.ndarray, M: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """The convex 2-D ``polygon`` cut to the half-planes ``M w ≤ r`` (Sutherland–Hodgman)."""
+    for m, c in zip(M, r, strict=True):
+        s = polygon @ m - c
+        if np.all(s <= 0):
+            continue
+        if np.all(s > 0):
+            return np.zeros((0, 2))
+        kept = []
+        for k in range(len(polygon)):
+            nxt = (k + 1) % len(polygon)
+            if s[k] <= 0:
+                kept.append(polygon[k])
+            if (s[k] <= 0) != (s[nxt] <= 0):
+                kept.append(polygon[k] + s[k] / (s[k] - s[nxt]) * (polygon[nxt] - polygon[k]))
+        polygon = np.array(kept)
+    return polygon
 
 
 def _in_triangles(triangles: np.ndarray, rng: np.random.Generator) -> np.ndarray:
