@@ -19,6 +19,23 @@ def test_axis_belief_is_nominal_plus_and_minus_n(peg):
     assert np.degrees(np.arccos((np.trace(tilted) - 1) / 2)) == pytest.approx(2.0)
 
 
+def test_axis_belief_with_more_points_fills_in_between():
+    task = load_task("puzzle", ["grasp.x=1cm"])
+    offsets = [
+        p.offsets for p in initial_belief(_with_belief(task, {"generator": "axis", "points": 5}))
+    ]
+    assert offsets == [{}, *({"grasp.x": pytest.approx(v)} for v in (0.01, -0.01, 0.005, -0.005))]
+    seven = [
+        p.offsets for p in initial_belief(_with_belief(task, {"generator": "axis", "points": 7}))
+    ]
+    steps = [1, -1, 2 / 3, -2 / 3, 1 / 3, -1 / 3]
+    assert [o["grasp.x"] for o in seven[1:]] == pytest.approx([0.01 * k for k in steps])
+    three = [
+        p.offsets for p in initial_belief(_with_belief(task, {"generator": "axis", "points": 3}))
+    ]
+    assert three == offsets[:3]
+
+
 def test_env_offset_moves_the_environment():
     task = load_task("peg-in-hole", ["env.y=1cm"])
     _, plus, minus = initial_belief(task)

@@ -147,6 +147,14 @@ def test_unparsable_task_files(text, pattern, tmp_path):
     assert re.search(pattern, result.stderr), result.stderr
 
 
+def test_axis_belief_points_must_be_odd(tmp_path):
+    text = builtin_tasks()["puzzle"].read_text().replace("points: 5", "points: 4")
+    expected = text.splitlines().index("  points: 4") + 1
+    pattern = rf"task\.yaml:{expected}: belief\.points: must be odd .*got 4$"
+    with pytest.raises(TaskError, match=pattern):
+        load_task(str(write_task(tmp_path, text)))
+
+
 def test_error_line_number_points_at_the_key(tmp_path):
     text = builtin_tasks()["peg-in-hole"].read_text()
     text = text.replace("friction: 0.45", "friction: 0.45\nfrobnicate: 1")

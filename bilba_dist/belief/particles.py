@@ -64,13 +64,24 @@ def initial_belief(task: Task) -> tuple[Particle, ...]:
     elif isinstance(spec, ExtremalRandomBelief):
         offsets = extremal_offsets(bounds) + random_offsets(bounds, spec.random, spec.seed)
     else:
-        offsets = [{}, *extremal_offsets(bounds)]
+        offsets = [{}, *extremal_offsets(bounds), *inner_offsets(bounds, spec.points)]
     return tuple(make_particle(task, o) for o in offsets)
 
 
 def extremal_offsets(bounds: Mapping[str, float]) -> list[dict[str, float]]:
     """+n and -n on each bounded axis, one axis at a time."""
     return [{key: sign * n} for key, n in bounds.items() for sign in (1.0, -1.0)]
+
+
+def inner_offsets(bounds: Mapping[str, float], points: int) -> list[dict[str, float]]:
+    """Between 0 and ±n on each bounded axis, evenly: for ``points`` = 5, ±n/2 (3: none)."""
+    steps = (points - 1) // 2
+    return [
+        {key: sign * n * k / steps}
+        for k in range(steps - 1, 0, -1)
+        for key, n in bounds.items()
+        for sign in (1.0, -1.0)
+    ]
 
 
 def random_offsets(bounds: Mapping[str, float], k: int, seed: int) -> list[dict[str, float]]:

@@ -83,6 +83,19 @@ class GoalSpec(Strict):
 
 class AxisBelief(Strict):
     generator: Literal["axis"] = "axis"
+    points: int = Field(
+        default=3,
+        ge=3,
+        description="particles along each bounded axis, the nominal one included: 3 is −n, 0, "
+        "+n (the paper's); 5 adds ±n/2, and so on, evenly spaced",
+    )
+
+    @field_validator("points")
+    @classmethod
+    def _odd(cls, points: int) -> int:
+        if points % 2 == 0:
+            raise ValueError(f"must be odd (the nominal particle and ± pairs), got {points}")
+        return points
 
 
 class ExtremalRandomBelief(Strict):
