@@ -154,7 +154,7 @@ class PlannerParams(Strict):
     # Stop scoring sampled setpoints once this many in a row bring no better score, and go
     # on to the GP rounds (ours; 0, the default, scores every sample, as the authors do).
     # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); so does the puzzle,
-    # since its graph lost the edge-to-edge modes (10/10 runs, ~2.5x faster; README).
+    # since its graph lost the edge-to-edge modes (10/10 runs, ~2.5x faster; benchmarks/HISTORY.md).
     sample_patience: int = Field(default=0, ge=0)
     # Before the full MakeContact, race the next contacts of up to this many schedules as
     # short as Dijkstra's (whose tie-break picks among them): race_chunks chunks of sampled
