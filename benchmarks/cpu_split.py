@@ -8,7 +8,7 @@ it bounds the speed-up of one plan (Amdahl's law).
 """
 
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 
 try:
     import psutil
@@ -69,3 +69,10 @@ def serial_bound(serial_s: float, wall_s: float, actors: int = 2) -> float:
     next batch depends on it), if the rest divided perfectly among them."""
     serial = min(max(serial_s / wall_s, 0.0), 1.0) if wall_s > 0 else 1.0
     return 1.0 / (serial + (1.0 - serial) / actors)
+
+
+def batch_speedup(one: Mapping[str, float], two: Mapping[str, float]) -> float:
+    """How much faster the rollout batches ran on the second split than on the first (each
+    with ``wall`` and ``serial`` seconds): the wall time with a batch in flight, one over the
+    other. With no serial work at all, the plans themselves would differ by this much."""
+    return (one["wall"] - one["serial"]) / (two["wall"] - two["serial"])

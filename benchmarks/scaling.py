@@ -14,8 +14,11 @@ each); peg-x plans (~120-600 rollouts) give the headline figures; puzzle-x plans
 of rollouts, a minute or more a seed on 2 actors; only when asked, choose seeds that plan)
 are the load scaling is for. Batch: peg-pitch × both planners × N seeds through `run_batch`
 with 1 and then 2 CPUs (time from the first submission to the last record). Targets (issue
-5): 2 actors ≥ 1.8× one; Ray on one actor ≤ 10 % slower than in-process. Prints a table and
-one JSON line.
+5): 2 actors ≥ 1.8× one; Ray on one actor ≤ 10 % slower than in-process. Besides, where the
+time went: the serial share and the most it allows 2, 4, 8 and 16 actors (Amdahl; batches
+of a few rollouts make many actors gain less still), and how much faster 2 actors ran the
+batches alone (what one plan would gain with no serial work). Prints a table and one JSON
+line.
 """
 
 import argparse
@@ -27,7 +30,7 @@ import tempfile
 from pathlib import Path
 
 import ray
-from cpu_split import GROUPS, TimedBackend, cpu_seconds, serial_bound, spent
+from cpu_split import GROUPS, TimedBackend, batch_speedup, cpu_seconds, serial_bound, spent
 from planning import SETTINGS  # benchmarks/planning.py: name -> (task, uncertainty)
 
 from bilba_dist.planning.bilba import plan
@@ -108,6 +111,12 @@ def print_split(splits: dict[str, dict], rows: dict[str, dict]) -> None:
         print(
             f"  {setting}: {100 * r['serial_share_1_actor']:.1f} % of the 1-actor wall time had "
             f"no rollout in flight, so 2 actors give at most {r['two_actor_bound']:.2f}x"
+            f" (4, 8, 16 actors: {', '.join(f'{b:.1f}x' for b in r['more_actor_bounds'])})"
+        )
+        print(
+            f"  {setting}: while batches were in flight, 2 actors were "
+            f"{r['in_batch_speedup']:.2f}x faster than 1: with no serial work at all, one plan "
+            f"would run that much faster"
         )
 
 
@@ -124,13 +133,15 @@ def main() -> None:
         times, splits[setting] = one_plan(*SETTINGS[setting], args.seeds)
         pairs = zip(times["1 actor"], times["2 actors"], times["in-process"], strict=True)
         ratios = [(one / two, one / local - 1) for one, two, local in pairs]
-        one = splits[setting]["1 actor"]
+        one, two = splits[setting]["1 actor"], splits[setting]["2 actors"]
         rows[setting] = {
             "two_actor_speedup": statistics.median(r[0] for r in ratios),
             "ray_overhead": statistics.median(r[1] for r in ratios),
             "serial_share_1_actor": one["serial"] / one["wall"],
             "two_actor_bound": serial_bound(one["serial"], one["wall"]),
-            "two_actor_total_ratio": one["wall"] / splits[setting]["2 actors"]["wall"],
+            "more_actor_bounds": [serial_bound(one["serial"], one["wall"], n) for n in (4, 8, 16)],
+            "in_batch_speedup": batch_speedup(one, two),
+            "two_actor_total_ratio": one["wall"] / two["wall"],
             **{f"{k.replace(' ', '_')}_median_s": statistics.median(v) for k, v in times.items()},
         }
     elapsed = batch(args.jobs_seeds)

@@ -56,3 +56,12 @@ def test_serial_share_bounds_the_speedup_as_amdahl_says(
     from cpu_split import serial_bound
 
     assert serial_bound(serial_s, wall_s, actors) == pytest.approx(bound)
+
+
+def test_batch_speedup_compares_the_time_with_a_batch_in_flight(monkeypatch):
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from cpu_split import batch_speedup
+
+    # 9 s of batches on one actor, 5 s on two; the serial second is the same on both.
+    assert batch_speedup({"wall": 10.0, "serial": 1.0}, {"wall": 6.0, "serial": 1.0}) == 1.8
+    assert batch_speedup({"wall": 10.0, "serial": 4.0}, {"wall": 7.0, "serial": 4.0}) == 2.0
