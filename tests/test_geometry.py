@@ -28,6 +28,49 @@ def test_coplanar_triangles_merge_into_one_face_each():
     assert sorted(f.name for f in cube.faces) == [f"c/f{i}" for i in range(6)]
 
 
+@given(st.integers(0, 2**32 - 1))
+@settings(max_examples=40, deadline=None)
+@example(0)
+def test_hull_faces_are_closed_counter_clockwise_rings(seed):
+    """Random clouds and a rotated box (faces symmetric about their centres): every face's
+    ring is planar and counter-clockwise seen from outside, and the rings close up into a
+    polyhedron (each edge in two faces; V - E + F = 2)."""
+    from bilba_dist.geometry.hull import convex_hull, face_edges, planar_faces
+
+    rng = np.random.default_rng(seed)
+    box = np.array(CUBE, dtype=float) * [1.0, 2.0, 3.0] @ pin.exp3(rng.normal(size=3)).T
+    for points in (rng.normal(size=(int(rng.integers(5, 40)), 3)), box):
+        hull = convex_hull(points, "cloud")
+        faces = planar_faces(points, hull)
+        for face in faces:
+            ring = points[list(face.vertices)]
+            assert np.allclose(ring @ face.normal, face.offset, atol=1e-9)
+            assert np.all(points @ face.normal <= face.offset + 1e-9)
+            turns = np.cross(np.roll(ring, -1, axis=0) - ring, np.roll(ring, -2, axis=0) - ring)
+            assert np.all(turns @ face.normal > 0)
+        edges = face_edges(f.vertices for f in faces)
+        rims = [
+            tuple(sorted(e))
+            for f in faces
+            for e in zip(f.vertices, np.roll(f.vertices, -1), strict=True)
+        ]
+        assert all(rims.count(tuple(e)) == 2 for e in edges.tolist())
+        assert len(hull.vertices) - len(edges) + len(faces) == 2
+
+
+def test_face_means_add_in_the_order_a_plain_mean_does():
+    """Face normals and centres are means over a face's rows, computed for all faces at
+    once; rounded differently, a symmetric face's ring would start at another corner."""
+    from bilba_dist.geometry.hull import _mean_by
+
+    rng = np.random.default_rng(7)
+    values = rng.normal(size=(400, 3)) * 10.0 ** rng.uniform(-9, 0, size=(400, 1))
+    groups = rng.integers(0, 37, size=400)
+    means = _mean_by(values, groups, 37)
+    for g in range(37):
+        assert np.array_equal(means[g], values[groups == g].mean(axis=0))
+
+
 def test_name_map_names_faces_by_normal():
     cube = convex_piece("c", CUBE, pin.SE3.Identity(), {"top": [0, 0, 2], "left": [-1, 0, 0]})
     assert np.allclose(cube.face("c/top").normal, [0, 0, 1])

@@ -45,17 +45,17 @@ def minkowski_polytope(env: ConvexPiece, manip: ConvexPiece, R_OM: np.ndarray) -
     hull = convex_hull(points, f"C-obs of {env.name}/{manip.name}")
     faces = planar_faces(points, hull)
     keep = np.array(sorted(hull.vertices))
-    remap = {int(old): new for new, old in enumerate(keep)}
+    remap = np.full(len(points), -1)
+    remap[keep] = np.arange(len(keep))
     A = np.array([f.normal for f in faces])
     b = np.array([f.offset for f in faces])
-    labels = tuple(_facet_labels(env, manip, E, M, n) for n in A)
-    edges = face_edges(tuple(remap[i] for i in f.vertices) for f in faces)
+    edges = face_edges(remap[list(f.vertices)].tolist() for f in faces)
     return Polytope(
         env_piece=env.name,
         manip_piece=manip.name,
         A=A,
         b=b,
-        labels=labels,
+        labels=_facet_labels(env, manip, E, M, A),
         polygons=tuple(points[list(f.vertices)] for f in faces),
         vertices=points[keep],
         edges=edges,
@@ -65,21 +65,32 @@ def minkowski_polytope(env: ConvexPiece, manip: ConvexPiece, R_OM: np.ndarray) -
 
 
 def _facet_labels(
-    env: ConvexPiece, manip: ConvexPiece, E: np.ndarray, M: np.ndarray, normal: np.ndarray
-) -> ContactSet:
-    env_support = _support(E @ normal)
-    manip_support = _support(-(M @ normal))
-    env_faces = _faces_holding(env, env_support)
-    manip_faces = _faces_holding(manip, manip_support)
-    return frozenset(ContactPair(e, m) for e, m in product(env_faces, manip_faces))
+    env: ConvexPiece, manip: ConvexPiece, E: np.ndarray, M: np.ndarray, A: np.ndarray
+) -> tuple[ContactSet, ...]:
+    """Per facet normal (rows of ``A``): every face of E holding E's supporting feature
+    times every face of M holding M's. Facets with the same two features share one label."""
+    env_faces = _faces_holding(env, E @ A.T)
+    manip_faces = _faces_holding(manip, -(M @ A.T))
+    labels: dict[tuple[tuple[str, ...], tuple[str, ...]], ContactSet] = {}
+    for key in zip(env_faces, manip_faces, strict=True):
+        if key not in labels:
+            labels[key] = frozenset(ContactPair(e, m) for e, m in product(*key))
+    return tuple(labels[key] for key in zip(env_faces, manip_faces, strict=True))
 
 
-def _support(heights: np.ndarray) -> set[int]:
-    return set(np.flatnonzero(heights >= heights.max() - TOL).tolist())
-
-
-def _faces_holding(piece: ConvexPiece, vertex_ids: set[int]) -> list[str]:
-    return [f.name for f in piece.faces if vertex_ids <= set(f.vertices)]
+def _faces_holding(piece: ConvexPiece, heights: np.ndarray) -> list[tuple[str, ...]]:
+    """Per column of ``heights`` (vertex × direction), the piece's faces that hold its
+    supporting feature: every vertex within TOL of the highest."""
+    support = heights >= heights.max(axis=0) - TOL
+    faces = [(f.name, set(f.vertices)) for f in piece.faces]
+    found: dict[bytes, tuple[str, ...]] = {}
+    out = []
+    for column, key in enumerate(map(bytes, np.packbits(support, axis=0).T)):
+        if key not in found:
+            ids = set(np.flatnonzero(support[:, column]).tolist())
+            found[key] = tuple(name for name, holds in faces if ids <= holds)
+        out.append(found[key])
+    return out
 
 
 def slack(polytope: Polytope, points: np.ndarray) -> np.ndarray:

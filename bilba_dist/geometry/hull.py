@@ -6,7 +6,7 @@ points, and orders each face's vertices counter-clockwise seen from outside.
 """
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,31 +45,55 @@ def convex_hull(points: np.ndarray, what: str) -> ConvexHull:
 
 def planar_faces(points: np.ndarray, hull: ConvexHull) -> list[HullFace]:
     """Merge the hull's coplanar triangles into faces, in the order of each face's first
-    triangle. (Vectorised: the planner builds a C-obs slice per particle per contact, and
-    this was most of a slice's time.)"""
+    triangle, each face's vertices counter-clockwise seen from outside. (Vectorised where
+    the arithmetic allows: the planner builds a C-obs slice per particle per contact, and
+    this was most of a slice's time. The dot products stay one BLAS call per face, as
+    summing the products in numpy rounds differently, and a rounding changes which
+    vertex a symmetric face's ring starts at.)"""
     normals = hull.equations[:, :3]
     close = normals @ normals.T > 1.0 - NORMAL_TOL
     first = close.argmax(axis=1)  # the first triangle facing the same way (at worst itself)
     first = first[first]  # a chain of near-equal normals joins its first's face
-    faces = []
-    for leader in np.unique(first):
-        group = np.flatnonzero(first == leader)
-        ids = np.unique(hull.simplices[group])
-        normal = normals[group].mean(axis=0)
-        normal /= math.sqrt(normal @ normal)
-        offset = float((points[ids] @ normal).max())
-        faces.append(HullFace(normal, offset, _ccw(points, ids, normal)))
-    return faces
-
-
-def _ccw(points: np.ndarray, ids: np.ndarray, normal: np.ndarray) -> tuple[int, ...]:
-    """Order the face's vertices counter-clockwise around ``normal``."""
+    leaders, face_of = np.unique(first, return_inverse=True)
+    means = _mean_by(normals, face_of, len(leaders))
+    member = np.zeros((len(leaders), len(points)), dtype=bool)
+    member[face_of[:, None], hull.simplices] = True  # the points each face's triangles use
+    face_of_point, ids = np.nonzero(member)  # face by face, each face's points ascending
+    counts = np.bincount(face_of_point, minlength=len(leaders))
+    starts = np.cumsum(counts) - counts
     p = points[ids]
-    d = p - p.mean(axis=0)
-    u = d[0] if d[0] @ d[0] > 0 else _cross(normal, np.array([1.0, 0.0, 0.0]))
-    u = u / math.sqrt(u @ u)
-    angles = np.arctan2(d @ _cross(normal, u), d @ u)
-    return tuple(ids[np.argsort(angles)].tolist())
+    d = p - _mean_by(p, face_of_point, len(leaders))[face_of_point]  # from each face's centre
+    cos, sin = np.empty(len(p)), np.empty(len(p))
+    planes = []
+    for k, mean in enumerate(means):
+        rows = slice(starts[k], starts[k] + counts[k])
+        normal = mean / math.sqrt(mean @ mean)
+        planes.append((normal, float((p[rows] @ normal).max())))
+        u = d[starts[k]] if d[starts[k]] @ d[starts[k]] > 0 else _cross(normal, _X)
+        u = u / math.sqrt(u @ u)
+        cos[rows], sin[rows] = d[rows] @ u, d[rows] @ _cross(normal, u)
+    ring = ids[np.lexsort((np.arctan2(sin, cos), face_of_point))]
+    return [
+        HullFace(normal, offset, tuple(ring[start : start + count].tolist()))
+        for (normal, offset), start, count in zip(planes, starts, counts, strict=True)
+    ]
+
+
+_X = np.array([1.0, 0.0, 0.0])
+
+
+def _mean_by(values: np.ndarray, groups: np.ndarray, n: int) -> np.ndarray:
+    """Per group 0..n-1, the mean of its rows of ``values``: rows added in order, then
+    divided by their count — the arithmetic of ``values[rows].mean(axis=0)``, to the bit
+    (np.add.reduceat adds in another order)."""
+    order = np.argsort(groups, kind="stable")
+    counts = np.bincount(groups, minlength=n)
+    rank = np.arange(len(order)) - np.repeat(np.cumsum(counts) - counts, counts)
+    sums = np.zeros((n, values.shape[1]))
+    for r in range(int(rank.max()) + 1 if len(rank) else 0):
+        rows = order[rank == r]  # at most one row per group
+        sums[groups[rows]] += values[rows]
+    return sums / counts[:, None]
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -79,10 +103,15 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     )
 
 
-def face_edges(rings: Iterable[tuple[int, ...]]) -> np.ndarray:
+def face_edges(rings: Iterable[Sequence[int]]) -> np.ndarray:
     """The edges of faces given as vertex rings, as sorted (E, 2) index pairs, each once."""
-    edges = set()
-    for ring in rings:
-        for a, b in zip(ring, ring[1:] + ring[:1], strict=True):
-            edges.add((min(a, b), max(a, b)))
-    return np.array(sorted(edges), dtype=int).reshape(-1, 2)
+    pairs = np.array(
+        [(a, b) for ring in rings for a, b in zip(ring, [*ring[1:], ring[0]], strict=True)],
+        dtype=int,
+    ).reshape(-1, 2)
+    if not len(pairs):
+        return pairs
+    low, high = pairs.min(axis=1), pairs.max(axis=1)
+    span = int(high.max()) + 1
+    codes = np.unique(low * span + high)  # sorted by (low, high), each once
+    return np.column_stack([codes // span, codes % span])
