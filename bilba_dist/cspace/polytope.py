@@ -8,6 +8,7 @@ of E holding E's supporting feature, times every face of M holding M's supportin
 """
 
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import product
 
 import numpy as np
@@ -68,29 +69,32 @@ def _facet_labels(
     env: ConvexPiece, manip: ConvexPiece, E: np.ndarray, M: np.ndarray, A: np.ndarray
 ) -> tuple[ContactSet, ...]:
     """Per facet normal (rows of ``A``): every face of E holding E's supporting feature
-    times every face of M holding M's. Facets with the same two features share one label."""
+    times every face of M holding M's."""
     env_faces = _faces_holding(env, E @ A.T)
     manip_faces = _faces_holding(manip, -(M @ A.T))
-    labels: dict[tuple[tuple[str, ...], tuple[str, ...]], ContactSet] = {}
-    for key in zip(env_faces, manip_faces, strict=True):
-        if key not in labels:
-            labels[key] = frozenset(ContactPair(e, m) for e, m in product(*key))
-    return tuple(labels[key] for key in zip(env_faces, manip_faces, strict=True))
+    return tuple(map(_label, env_faces, manip_faces))
 
 
 def _faces_holding(piece: ConvexPiece, heights: np.ndarray) -> list[tuple[str, ...]]:
     """Per column of ``heights`` (vertex × direction), the piece's faces that hold its
     supporting feature: every vertex within TOL of the highest."""
     support = heights >= heights.max(axis=0) - TOL
-    faces = [(f.name, set(f.vertices)) for f in piece.faces]
-    found: dict[bytes, tuple[str, ...]] = {}
-    out = []
-    for column, key in enumerate(map(bytes, np.packbits(support, axis=0).T)):
-        if key not in found:
-            ids = set(np.flatnonzero(support[:, column]).tolist())
-            found[key] = tuple(name for name, holds in faces if ids <= holds)
-        out.append(found[key])
-    return out
+    faces = piece.face_vertex_sets
+    return [_holding(faces, key) for key in map(bytes, np.packbits(support, axis=0).T)]
+
+
+# A slice has ~30 facets per piece pair and a plan builds hundreds of slices, but the
+# features that support them, and so the labels, come from a short list: cached.
+@lru_cache(maxsize=16384)
+def _holding(faces: tuple[tuple[str, frozenset[int]], ...], support: bytes) -> tuple[str, ...]:
+    """The faces holding every vertex whose bit is set in ``support`` (np.packbits)."""
+    ids = set(np.flatnonzero(np.unpackbits(np.frombuffer(support, dtype=np.uint8))).tolist())
+    return tuple(name for name, holds in faces if ids <= holds)
+
+
+@lru_cache(maxsize=16384)
+def _label(env_faces: tuple[str, ...], manip_faces: tuple[str, ...]) -> ContactSet:
+    return frozenset(ContactPair(e, m) for e, m in product(env_faces, manip_faces))
 
 
 def slack(polytope: Polytope, points: np.ndarray) -> np.ndarray:

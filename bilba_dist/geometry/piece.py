@@ -7,6 +7,7 @@ piece frame) or ``f0, f1, …`` in a fixed order (by normal, descending x, then 
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
@@ -49,6 +50,11 @@ class ConvexPiece:
     edges: np.ndarray  # (E, 2) vertex index pairs
     box_size: np.ndarray | None = None  # for boxes: full size [m], centred at X_PB
     X_PB: pin.SE3 | None = None  # for boxes: the box centre frame in the part frame
+
+    @cached_property
+    def face_vertex_sets(self) -> tuple[tuple[str, frozenset[int]], ...]:
+        """Each face's name and the indices of its vertices (a hashable key for caches)."""
+        return tuple((f.name, frozenset(f.vertices)) for f in self.faces)
 
     def face(self, name: str) -> Face:
         for face in self.faces:
