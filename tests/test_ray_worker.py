@@ -1,5 +1,7 @@
 """The RolloutWorker as a Ray actor on a real local Ray instance: same results as in-process."""
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -23,10 +25,13 @@ def test_ray_actor_gives_bit_identical_rollouts(local_ray):
     local = RolloutWorker(task, "panda").simulate(requests)
     actor = ray.remote(RolloutWorker).remote(task.spec, "panda")
     remote = ray.get(actor.simulate.remote(requests))
-    assert [r.contacts for r in remote] == [r.contacts for r in local]
-    for a, b in zip(remote, local, strict=True):
-        assert np.array_equal(a.state.q, b.state.q)
-        assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
+    # ... and as `RayPool` calls it: requests and results pickled by us.
+    pickled = pickle.loads(ray.get(actor.simulate_pickled.remote(pickle.dumps(requests))))
+    for results in (remote, pickled):
+        assert [r.contacts for r in results] == [r.contacts for r in local]
+        for a, b in zip(results, local, strict=True):
+            assert np.array_equal(a.state.q, b.state.q)
+            assert np.array_equal(a.state.X_WM.homogeneous, b.state.X_WM.homogeneous)
 
 
 def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_ray):

@@ -8,6 +8,7 @@ as a `TaskSpec`, which pickles, and builds its worlds in its own process.
 """
 
 import os
+import pickle
 from collections.abc import Sequence
 from dataclasses import replace
 
@@ -73,6 +74,11 @@ class RolloutWorker:
     ) -> list[RolloutResult]:
         """Each request in turn (``prefetch`` is for backends with idle workers: unused)."""
         return [self._one(r) for r in requests]
+
+    def simulate_pickled(self, requests: bytes) -> bytes:
+        """``simulate`` for a pickled list of requests, its results pickled (how `RayPool`
+        calls an actor)."""
+        return pickle.dumps(self.simulate(pickle.loads(requests)), protocol=5)
 
     def _one(self, request: RolloutRequest) -> RolloutResult:
         particle = request.particle
