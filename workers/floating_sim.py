@@ -36,7 +36,7 @@ def part_compound(part: Part, client: int) -> int:
                 files.append("")
             else:
                 path = Path(folder) / f"{piece.name}.obj"
-                write_obj(piece.vertices, path)
+                write_obj(piece, path)
                 kinds.append(p.GEOM_MESH)
                 halves.append([0.0, 0.0, 0.0])
                 files.append(str(path))

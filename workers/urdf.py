@@ -2,20 +2,29 @@
 joints made fixed, and the part as one more link fixed to the hand at ``X_GM``.
 
 A link of the robot is rigid by construction (a fixed constraint drifts and slows physics by
-1.7×: PHYSICS.md). Box pieces are exact box shapes; other pieces are convex meshes.
+1.7×: docs/physics.md). Box pieces are exact box shapes; other pieces are convex meshes, which
+PyBullet's URDF loader gives a fixed collision margin of 1 mm (the shape collides as the hull
+grown by 1 mm, and `changeDynamics` cannot change it on a link). So each mesh is written
+inset by that margin: the hull grown back is the piece, exact on its faces, with edges and
+corners rounded to 1 mm (as box shapes are).
 """
 
 import re
 import tempfile
+from itertools import pairwise
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import HalfspaceIntersection
 
-from bilba_dist.geometry.piece import Part
+from bilba_dist.errors import GeometryError
+from bilba_dist.geometry.piece import ConvexPiece, Part, convex_piece
 from bilba_dist.robot.panda import FINGER_JOINTS, panda_urdf
 
 PART_LINK = "manipuland"
+#: The collision margin PyBullet's URDF loader gives a convex mesh [m].
+URDF_MESH_MARGIN_M = 0.001
 
 
 def _origin(X: pin.SE3) -> str:
@@ -24,9 +33,32 @@ def _origin(X: pin.SE3) -> str:
     return f'<origin xyz="{xyz}" rpy="{rpy}"/>'
 
 
-def write_obj(vertices: np.ndarray, path: Path) -> None:
-    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in vertices]
-    path.write_text("\n".join(lines) + "\n")  # pybullet takes the convex hull of the points
+def write_obj(piece: ConvexPiece, path: Path) -> None:
+    """The piece as a Wavefront OBJ in its part's frame: its vertices and every face as a
+    fan of triangles. (An OBJ of vertices alone loads as an empty mesh: PyBullet warns
+    "issue extracting mesh" and the link collides with nothing.)"""
+    lines = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in piece.vertices]
+    for face in piece.faces:
+        a, *rest = (i + 1 for i in face.vertices)  # OBJ counts from 1, counter-clockwise
+        lines += [f"f {a} {b} {c}" for b, c in pairwise(rest)]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def inset(piece: ConvexPiece, depth: float) -> ConvexPiece:
+    """``piece`` with every face moved ``depth`` [m] inwards (a piece thinner than twice
+    that has nothing left: an error naming it)."""
+    normals = np.array([f.normal for f in piece.faces])
+    offsets = np.array([f.offset for f in piece.faces]) - depth
+    centre = piece.vertices.mean(axis=0)
+    if (normals @ centre - offsets).max() >= -1e-6:
+        raise GeometryError(
+            f"piece {piece.name!r} is too thin to simulate on the Panda model: its faces "
+            f"must be more than {2 * depth * 1000:g} mm apart"
+        )
+    corners = HalfspaceIntersection(np.column_stack([normals, -offsets]), centre)
+    return convex_piece(
+        piece.name, np.unique(corners.intersections.round(12), axis=0), pin.SE3.Identity()
+    )
 
 
 def part_collisions(part: Part, folder: Path) -> str:
@@ -37,7 +69,7 @@ def part_collisions(part: Part, folder: Path) -> str:
             geometry, origin = f'<box size="{size}"/>', _origin(piece.X_PB)
         else:
             obj = folder / f"{part.name}_{piece.name}.obj"
-            write_obj(piece.vertices, obj)
+            write_obj(inset(piece, URDF_MESH_MARGIN_M), obj)
             geometry, origin = f'<mesh filename="{obj}"/>', _origin(pin.SE3.Identity())
         elements.append(
             f'<collision name="{piece.name}">{origin}<geometry>{geometry}</geometry></collision>'
