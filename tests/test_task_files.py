@@ -21,7 +21,7 @@ def run_cli(*args: str):
 
 
 def test_builtin_tasks_load_by_name_and_path():
-    assert set(builtin_tasks()) == {"peg-in-hole", "puzzle"}
+    assert set(builtin_tasks()) == {"hex-peg", "peg-in-hole", "puzzle"}
     for name, path in builtin_tasks().items():
         assert load_task(name).hash == load_task(str(path)).hash
 
@@ -114,7 +114,7 @@ BAD_FILES = {
     ),
     "box and convex both": (
         lambda d: _set(d, {"vertices": [[0, 0, 0]] * 4}, "manipuland", "pieces", 0, "convex"),
-        r"exactly one of 'box' or 'convex'",
+        r"exactly one of 'box', 'convex', 'mesh'",
     ),
 }
 
@@ -166,7 +166,7 @@ def test_error_line_number_points_at_the_key(tmp_path):
 @pytest.mark.parametrize(
     ("args", "pattern"),
     [
-        (["graph", "no-such-task"], r"built-in: peg-in-hole, puzzle"),
+        (["graph", "no-such-task"], r"built-in: hex-peg, peg-in-hole, puzzle"),
         (["graph", "missing/task.yaml"], r"missing/task\.yaml: no such task file"),
         (["graph", "peg-in-hole", "-u", "grasp.pitch"], r"write AXIS=VALUE"),
         (["graph", "peg-in-hole", "-u", "grasp.pitch=-2deg"], r"bounds must be >= 0"),

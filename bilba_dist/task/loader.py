@@ -14,9 +14,11 @@ from pydantic import BaseModel, ValidationError
 
 from bilba_dist.errors import BilbaError, TaskError
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.mesh import mesh_vertices
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
+    ConvexSpec,
     PartSpec,
     PlannerParams,
     PoseSpec,
@@ -90,6 +92,7 @@ def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Ta
         spec = TaskSpec.model_validate(data)
     except ValidationError as exc:
         raise TaskError(describe_error(exc, source, lines)) from None
+    spec = with_meshes_loaded(spec, path.parent, source, lines)
     try:
         return build_task(spec, source)
     except BilbaError as exc:
@@ -161,6 +164,30 @@ def start_gripper_pose(spec: TaskSpec) -> pin.SE3:
 
 def to_pose(spec: PoseSpec) -> pin.SE3:
     return pose_from_xyz_rpy(spec.xyz, spec.rpy)
+
+
+def with_meshes_loaded(
+    spec: TaskSpec, folder: Path, source: str, lines: dict[Location, int]
+) -> TaskSpec:
+    """``spec`` with every ``mesh`` piece replaced by the ``convex`` piece it describes
+    (files relative to ``folder``), so the spec alone rebuilds the task (Ray workers, logs,
+    plan files)."""
+    parts = {}
+    for key in ("manipuland", "environment"):
+        part: PartSpec = getattr(spec, key)
+        pieces = []
+        for i, piece in enumerate(part.pieces):
+            if piece.mesh is not None:
+                try:
+                    vertices = mesh_vertices(folder / piece.mesh.file, piece.mesh.scale)
+                except BilbaError as exc:
+                    where = line_of((key, "pieces", i, "mesh", "file"), lines)
+                    raise TaskError(f"{source}:{where}: {key}.pieces[{i}]: {exc}") from None
+                convex = ConvexSpec(vertices=[tuple(v) for v in vertices], faces=piece.mesh.faces)
+                piece = piece.model_copy(update={"mesh": None, "convex": convex})
+            pieces.append(piece)
+        parts[key] = part.model_copy(update={"pieces": pieces})
+    return spec.model_copy(update=parts)
 
 
 def build_part(spec: PartSpec) -> Part:

@@ -43,16 +43,32 @@ class ConvexSpec(Strict):
     )
 
 
+class MeshSpec(Strict):
+    """A convex part from a mesh file (STL, OBJ, PLY, …; a path relative to the task file),
+    its coordinates multiplied by ``scale`` to get metres. Loading replaces it by the
+    ``convex`` piece it describes, so a loaded task carries the vertices, not the path."""
+
+    file: str = Field(min_length=1)
+    scale: float = Field(default=1.0, gt=0, allow_inf_nan=False)
+    faces: dict[str, tuple[float, float, float]] = Field(
+        default_factory=dict, description="face name -> outward normal in the piece frame"
+    )
+
+
+SHAPES = ("box", "convex", "mesh")
+
+
 class PieceSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_\-]+$")
     box: BoxSpec | None = None
     convex: ConvexSpec | None = None
+    mesh: MeshSpec | None = None
     pose: PoseSpec = PoseSpec()
 
     @model_validator(mode="after")
     def _one_shape(self) -> "PieceSpec":
-        if (self.box is None) == (self.convex is None):
-            raise ValueError(f"piece {self.name!r} needs exactly one of 'box' or 'convex'")
+        if sum(getattr(self, shape) is not None for shape in SHAPES) != 1:
+            raise ValueError(f"piece {self.name!r} needs exactly one of 'box', 'convex', 'mesh'")
         return self
 
 

@@ -1,0 +1,136 @@
+"""Mesh pieces: a closed convex mesh file is one convex piece; every bad mesh is one line
+naming the file, exit code 2."""
+
+import copy
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+
+from bilba_dist.planning.bilba import plan
+from bilba_dist.task.loader import builtin_tasks, load_task
+from bilba_dist.task.prismatic import prism, regular_polygon
+from tests.test_task_files import run_cli
+from workers.rollout_worker import RolloutWorker
+
+
+@pytest.fixture
+def hex_yaml() -> dict:
+    return yaml.safe_load(builtin_tasks()["hex-peg"].read_text())
+
+
+def write_mesh_task(tmp_path, data: dict, mesh: trimesh.Trimesh | bytes | None, **spec) -> str:
+    """The hex-peg task with its peg read from ``mesh`` written beside the task file."""
+    data = copy.deepcopy(data)
+    name = spec.pop("file", "part.stl")
+    if isinstance(mesh, bytes):
+        (tmp_path / name).write_bytes(mesh)
+    elif mesh is not None:
+        mesh.export(tmp_path / name)
+    data["manipuland"]["pieces"][0]["mesh"] = {
+        "file": name,
+        "scale": 0.001,
+        "faces": {"bottom": [0, 0, -1]},
+        **spec,
+    }
+    path = tmp_path / "task.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return str(path)
+
+
+def hexagonal_peg_mm() -> trimesh.Trimesh:
+    return trimesh.convex.convex_hull(np.array(prism(regular_polygon(6, 55.0), -75.0, 75.0)))
+
+
+def test_the_builtin_mesh_task_is_its_stl_as_one_convex_piece():
+    task = load_task("hex-peg")
+    (piece,) = task.manipuland.pieces
+    assert task.spec.manipuland.pieces[0].mesh is None  # resolved into vertices on load
+    assert len(piece.vertices) == 12 and len(piece.faces) == 8
+    across_flats = piece.vertices[:, 0].max() - piece.vertices[:, 0].min()
+    assert across_flats == pytest.approx(0.055, abs=1e-7)  # corners at ±30°: flats at ±y
+    bottom = task.manipuland.face("peg/bottom")
+    assert bottom.normal == pytest.approx([0, 0, -1]) and bottom.offset == pytest.approx(0.075)
+
+
+def test_a_mesh_in_another_unit_and_folder_is_the_same_piece(hex_yaml, tmp_path):
+    metres = hexagonal_peg_mm().apply_scale(0.001)
+    sub = tmp_path / "meshes"
+    sub.mkdir()
+    metres.export(sub / "peg.obj")
+    task = load_task(write_mesh_task(tmp_path, hex_yaml, None, file="meshes/peg.obj", scale=1.0))
+    builtin = load_task("hex-peg").manipuland.pieces[0].vertices
+    assert np.sort(task.manipuland.pieces[0].vertices, axis=0) == pytest.approx(
+        np.sort(builtin, axis=0), abs=1e-7
+    )
+
+
+def open_box() -> trimesh.Trimesh:
+    box = trimesh.creation.box((60.0, 60.0, 150.0))
+    return trimesh.Trimesh(box.vertices, box.faces[:-2])  # one side left open
+
+
+BAD = {
+    "missing": (None, {"file": "nowhere.stl"}, "cannot read it"),
+    "corrupt": (
+        b"solid x\nfacet normal 0 0 1\nouter loop\nvertex 1 2\n",
+        {},
+        "cannot load it|no triangles",
+    ),
+    "empty": (b"", {}, "cannot load it|holds no triangles"),
+    "open surface": (open_box(), {}, "not a closed"),
+    "flat": (
+        trimesh.Trimesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], [[0, 1, 2], [1, 3, 2]]),
+        {},
+        "not a closed|no volume",
+    ),
+    "non-convex": (
+        trimesh.creation.annulus(r_min=10.0, r_max=30.0, height=100.0),
+        {},
+        "not convex .*coacd",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", BAD)
+def test_a_bad_mesh_is_one_line_naming_the_file(case, hex_yaml, tmp_path):
+    mesh, spec, message = BAD[case]
+    path = write_mesh_task(tmp_path, hex_yaml, mesh, **spec)
+    result = run_cli("graph", path)
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert "task.yaml:" in line and "manipuland.pieces[0]: mesh " in line
+    assert str(tmp_path) in line
+    assert re.search(message, line), line
+
+
+@pytest.mark.parametrize("scale", [0, -0.001, ".nan", ".inf", "'a lot'"])
+def test_a_scale_that_is_not_a_positive_number_is_refused(scale, hex_yaml, tmp_path):
+    path = write_mesh_task(tmp_path, hex_yaml, hexagonal_peg_mm())
+    file = Path(path)
+    file.write_text(file.read_text().replace("scale: 0.001", f"scale: {scale}"))
+    result = run_cli("graph", path)
+    assert result.exit_code == 2 and len(result.stderr.splitlines()) == 1, result.output
+    assert "manipuland.pieces[0].mesh.scale" in result.stderr
+
+
+def test_a_piece_with_two_shapes_is_refused(hex_yaml, tmp_path):
+    data = copy.deepcopy(hex_yaml)
+    data["manipuland"]["pieces"][0]["box"] = {"size": [0.06, 0.06, 0.15]}
+    path = tmp_path / "task.yaml"
+    path.write_text(yaml.safe_dump(data))
+    result = run_cli("graph", str(path))
+    assert result.exit_code == 2
+    assert "needs exactly one of 'box', 'convex', 'mesh'" in result.stderr
+
+
+@pytest.mark.slow
+def test_the_mesh_task_plans_end_to_end_from_its_stl():
+    task = load_task("hex-peg")
+    result = plan(task, RolloutWorker(task), "bilba-variable", seed=0, timeout_s=120)
+    assert result.success, result.reason
+    final = result.final_belief
+    assert final is not None and all(task.goal in c for c in final.contacts)
