@@ -4,6 +4,7 @@ Lengths accept ``m cm mm`` and angles ``deg rad`` (bare numbers are metres and r
 Planner parameters default to the values of the authors' implementation (DESIGN.md).
 """
 
+import math
 from typing import Annotated, Literal
 
 from pydantic import (
@@ -15,14 +16,22 @@ from pydantic import (
     model_validator,
 )
 
-from bilba_dist.task.units import Angle, Length, parse_angle, parse_length
+from bilba_dist.task.units import Angle, Length, parse_angle, parse_length, within
 
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 ANGULAR_AXES = ("roll", "pitch", "yaw")
 
 
+#: Uncertainty bounds and particle offsets: positions within 10 cm, angles within 45° (more
+#: than the parts' own size or a quarter turn is no belief a compliant motion can funnel).
+MAX_OFFSET_M = 0.1
+MAX_OFFSET_RAD = math.pi / 4
+#: Particles in a belief: each costs a rollout per candidate motion.
+MAX_PARTICLES = 256
+
+
 class Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class PoseSpec(Strict):
@@ -37,7 +46,7 @@ class BoxSpec(Strict):
 
 
 class ConvexSpec(Strict):
-    vertices: list[tuple[Length, Length, Length]] = Field(min_length=4)
+    vertices: list[tuple[Length, Length, Length]] = Field(min_length=4, max_length=100_000)
     faces: dict[str, tuple[float, float, float]] = Field(
         default_factory=dict, description="face name -> outward normal in the piece frame"
     )
@@ -74,8 +83,10 @@ class PieceSpec(Strict):
 
 class PartSpec(Strict):
     name: str
-    pieces: list[PieceSpec] = Field(min_length=1)
-    mass: float = Field(default=0.5, gt=0, description="[kg]; used for the manipuland")
+    pieces: list[PieceSpec] = Field(min_length=1, max_length=500)
+    mass: float = Field(
+        default=0.5, gt=0, le=3.0, description="[kg]; used for the manipuland (Panda payload ≤ 3)"
+    )
 
 
 class RobotStartSpec(Strict):
@@ -102,6 +113,7 @@ class AxisBelief(Strict):
     points: int = Field(
         default=3,
         ge=3,
+        le=51,
         description="particles along each bounded axis, the nominal one included: 3 is −n, 0, "
         "+n (the paper's); 5 adds ±n/2, and so on, evenly spaced",
     )
@@ -116,8 +128,8 @@ class AxisBelief(Strict):
 
 class ExtremalRandomBelief(Strict):
     generator: Literal["extremal+random"]
-    random: int = Field(default=8, ge=0)
-    seed: int = 0
+    random: int = Field(default=8, ge=0, le=MAX_PARTICLES)
+    seed: int = Field(default=0, ge=0, lt=2**32)
 
 
 class ParticleOffset(Strict):
@@ -134,7 +146,7 @@ class ParticleOffset(Strict):
 
 class ExplicitBelief(Strict):
     generator: Literal["explicit"]
-    particles: list[ParticleOffset] = Field(min_length=1)
+    particles: list[ParticleOffset] = Field(min_length=1, max_length=MAX_PARTICLES)
 
 
 BeliefSpec = Annotated[
@@ -145,51 +157,51 @@ BeliefSpec = Annotated[
 class PlannerParams(Strict):
     """Defaults from the authors' implementation (DESIGN.md)."""
 
-    n_free: int = Field(default=3, ge=1)
-    delta_proj: float = Field(default=1e-4, ge=0)
-    min_mode_vertices: int = Field(default=4, ge=1)
+    n_free: int = Field(default=3, ge=1, le=100)
+    delta_proj: float = Field(default=1e-4, ge=0, le=1)
+    min_mode_vertices: int = Field(default=4, ge=1, le=1000)
     # Also join two modes whose C-obs regions come within this distance [m]: the short
     # free-space move between them (a part sliding off a bar's top into a slot just beside
     # it). Vertex sharing alone misses such steps (ours; 0, the default, is the authors'
     # graph; the puzzle sets 0.6 mm, just over its 0.5 mm side clearances; README).
-    near_edge_m: float = Field(default=0.0, ge=0)
-    n_attempts: int = Field(default=50, ge=1)
+    near_edge_m: float = Field(default=0.0, ge=0, le=0.05)
+    n_attempts: int = Field(default=50, ge=1, le=100_000)
     # When pruning has left no schedule from free, put the pruned edges back and go on, up
     # to this many rounds in all (ours; 1, the default, stops there, as the authors do).
     # MakeContact samples: an edge it failed once may work from a later belief or draw.
-    prune_rounds: int = Field(default=1, ge=1)
-    timeout_s: float = Field(default=900.0, gt=0)
-    setpoints_per_particle: int = Field(default=32, ge=1)
-    noisy_setpoints: int = Field(default=32, ge=0)
-    setpoint_noise_m: float = Field(default=0.01, ge=0)
+    prune_rounds: int = Field(default=1, ge=1, le=100)
+    timeout_s: float = Field(default=900.0, gt=0, le=7 * 86400)
+    setpoints_per_particle: int = Field(default=32, ge=1, le=4096)
+    noisy_setpoints: int = Field(default=32, ge=0, le=4096)
+    setpoint_noise_m: float = Field(default=0.01, ge=0, le=0.1)
     # Surface samples are pushed inside the C-obs by a depth uniform up to this [m] (the
     # paper's "slightly inside"; 3 mm is ours, the paper gives no figure). Deeper presses
     # push harder along the contact's normal, which a slide that must beat friction needs
     # (benchmarks/HISTORY.md, the puzzle).
-    setpoint_press_m: float = Field(default=0.003, ge=0)
+    setpoint_press_m: float = Field(default=0.003, ge=0, le=0.05)
     # Stop scoring sampled setpoints once this many in a row bring no better score, and go
     # on to the GP rounds (ours; 0, the default, scores every sample, as the authors do).
     # peg-in-hole sets 16 (3-4x fewer rollouts, every run successful); so does the puzzle,
     # since its graph lost the edge-to-edge modes (10/10 runs, ~2.5x faster; benchmarks/HISTORY.md).
-    sample_patience: int = Field(default=0, ge=0)
+    sample_patience: int = Field(default=0, ge=0, le=100_000)
     # Before the full MakeContact, race the next contacts of up to this many schedules as
     # short as Dijkstra's (whose tie-break picks among them): race_chunks chunks of sampled
     # setpoints each, in turn, no GP; follow the first motion that brings every particle in
     # (ours; 0 or 1, the default, follows Dijkstra's schedule alone, as the authors do).
-    race_contacts: int = Field(default=0, ge=0)
-    race_chunks: int = Field(default=2, ge=1)
-    gp_test_points: int = Field(default=1000, ge=1)
-    gp_noise: float = Field(default=0.02, ge=0)
-    gp_simulated: int = Field(default=31, ge=1)
-    gp_rounds: int = Field(default=3, ge=0)
+    race_contacts: int = Field(default=0, ge=0, le=100)
+    race_chunks: int = Field(default=2, ge=1, le=100)
+    gp_test_points: int = Field(default=1000, ge=1, le=100_000)
+    gp_noise: float = Field(default=0.02, ge=0, le=1)
+    gp_simulated: int = Field(default=31, ge=1, le=4096)
+    gp_rounds: int = Field(default=3, ge=0, le=100)
     # Stop the GP rounds after this many in a row that bring no better score (ours; the
     # authors always run gp_rounds: set gp_patience = gp_rounds for their behaviour).
-    gp_patience: int = Field(default=1, ge=1)
-    gp_restarts: int = Field(default=9, ge=0)
-    motion_timeout_s: float = Field(default=5.0, gt=0)
+    gp_patience: int = Field(default=1, ge=1, le=100)
+    gp_restarts: int = Field(default=9, ge=0, le=100)
+    motion_timeout_s: float = Field(default=5.0, gt=0, le=60)
     # PyBullet at 240 Hz (PHYSICS.md: 500/1000 Hz gave the same outcomes at 2×/4× the cost);
     # the authors used 0.005 s in Drake.
-    sim_timestep_s: float = Field(default=1 / 240, gt=0)
+    sim_timestep_s: float = Field(default=1 / 240, ge=1e-4, le=0.02)
     # Panda: move the joint reference through IK waypoints on the hand's straight line
     # (ours; off = a straight line in joint space, which bows the hand ~2 mm on an 8 cm
     # move). README, Physics rollouts.
@@ -197,7 +209,7 @@ class PlannerParams(Strict):
     # In contact when closer than this. The authors used 1 mm in Drake; in PyBullet a resting
     # contact sits at about -0.01 mm, and a 1 mm threshold flips on pegs resting 0.99 mm
     # from a wall (measured: early-stopped vs full-length rollouts disagreed on 1 in 50).
-    contact_distance_m: float = Field(default=2e-4, ge=0)
+    contact_distance_m: float = Field(default=2e-4, ge=0, le=0.01)
 
 
 class TaskSpec(Strict):
@@ -209,7 +221,7 @@ class TaskSpec(Strict):
     environment_pose: PoseSpec = Field(description="nominal X_WO")
     robot_start: RobotStartSpec
     goal: GoalSpec
-    friction: float = Field(gt=0)
+    friction: float = Field(gt=0, le=2.0, description="Coulomb μ, in (0, 2]")
     uncertainty: dict[str, float] = Field(default_factory=dict)
     belief: BeliefSpec = AxisBelief()
     planner: PlannerParams = PlannerParams()
@@ -223,6 +235,25 @@ class TaskSpec(Strict):
             raise ValueError(f"uncertainty bounds must be >= 0: {', '.join(negative)}")
         return values
 
+    @model_validator(mode="after")
+    def _particle_count(self) -> "TaskSpec":
+        n = particle_count(self.belief, sum(v > 0 for v in self.uncertainty.values()))
+        if n > MAX_PARTICLES:
+            raise ValueError(
+                f"belief: {n} particles, over the limit of {MAX_PARTICLES} (each costs a "
+                "rollout per candidate motion); fewer points or axes"
+            )
+        return self
+
+
+def particle_count(belief: "AxisBelief | ExtremalRandomBelief | ExplicitBelief", axes: int) -> int:
+    """How many particles a belief generator makes over ``axes`` bounded axes."""
+    if isinstance(belief, ExplicitBelief):
+        return len(belief.particles)
+    if isinstance(belief, ExtremalRandomBelief):
+        return 2 * axes + belief.random
+    return 1 + (belief.points - 1) * axes
+
 
 def parse_axis_values(values: object, prefix: str) -> dict[str, float]:
     """Read ``{axis: quantity}`` with the unit kind each axis needs (length or angle)."""
@@ -233,12 +264,18 @@ def parse_axis_values(values: object, prefix: str) -> dict[str, float]:
     parsed = {}
     for key, value in values.items():
         _, axis = check_axis_key(f"{prefix}{key}")
-        parse = parse_angle if axis in ANGULAR_AXES else parse_length
+        angular = axis in ANGULAR_AXES
+        parse = parse_angle if angular else parse_length
+        check = _ANGLE_OFFSET if angular else _LENGTH_OFFSET
         try:
-            parsed[str(key)] = parse(value)
+            parsed[str(key)] = check(parse(value))
         except ValueError as exc:
             raise ValueError(f"{prefix}{key}: {exc}") from None
     return parsed
+
+
+_LENGTH_OFFSET = within(MAX_OFFSET_M, "cm", 0.01)
+_ANGLE_OFFSET = within(MAX_OFFSET_RAD, "deg", math.pi / 180)
 
 
 def check_axis_key(key: str) -> tuple[str, str]:

@@ -1,14 +1,16 @@
 """Quantities with units in task files: lengths in m/cm/mm, angles in deg/rad.
 
 A bare number is taken in SI units (metres, radians). A string is a number followed by a unit,
-e.g. ``"2deg"``, ``"1.5 cm"``. The wrong kind of unit (``"2cm"`` for an angle) is an error.
+e.g. ``"2deg"``, ``"1.5 cm"``. The wrong kind of unit (``"2cm"`` for an angle) is an error,
+and so is a number that is not finite, a length outside the workspace (±2 m: the Panda
+reaches 0.855 m from its base, and parts' frames sit near it) or an angle beyond ±180°.
 """
 
 import math
 import re
 from typing import Annotated
 
-from pydantic import BeforeValidator
+from pydantic import AfterValidator, BeforeValidator
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
@@ -27,13 +29,30 @@ def parse_quantity(value: object, units: dict[str, float], kind: str) -> float:
     if match is None:
         raise ValueError(f"cannot read {value!r} as a {kind}; write e.g. '2{next(iter(units))}'")
     number, unit = float(match.group(1)), match.group(2)
-    if unit == "":
-        return number
-    if unit not in units:
+    if unit and unit not in units:
         article = "an" if kind[0] in "aeiou" else "a"
         allowed = ", ".join(sorted(units))
         raise ValueError(f"unit {unit!r} is not {article} {kind} unit; use one of {allowed}")
-    return number * units[unit]
+    return number * units[unit] if unit else number
+
+
+def within(limit: float, unit: str, scale: float = 1.0, what: str = ""):
+    """A check that a quantity is finite and within ±``limit`` (SI), quoted in ``unit``
+    (``scale`` SI units each)."""
+
+    def check(value: float) -> float:
+        if not math.isfinite(value):
+            raise ValueError(f"must be a finite number, got {value}")
+        if abs(value) > limit * (1 + 1e-12):
+            raise ValueError(f"{value / scale:g} {unit} is outside ±{limit / scale:g} {unit}{what}")
+        return value
+
+    return check
+
+
+#: Lengths anywhere in a task [m] and angles [rad].
+WORKSPACE_M = 2.0
+MAX_ANGLE = math.pi
 
 
 def parse_length(value: object) -> float:
@@ -44,5 +63,11 @@ def parse_angle(value: object) -> float:
     return parse_quantity(value, ANGLE_UNITS, "angle")
 
 
-Length = Annotated[float, BeforeValidator(parse_length)]
-Angle = Annotated[float, BeforeValidator(parse_angle)]
+Length = Annotated[
+    float,
+    BeforeValidator(parse_length),
+    AfterValidator(within(WORKSPACE_M, "m", what=" (the workspace)")),
+]
+Angle = Annotated[
+    float, BeforeValidator(parse_angle), AfterValidator(within(MAX_ANGLE, "deg", math.pi / 180))
+]

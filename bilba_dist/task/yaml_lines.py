@@ -1,4 +1,7 @@
-"""YAML loading that remembers the line of every key, so errors can point at it."""
+"""YAML loading that remembers the line of every key, so errors can point at it, and that
+refuses, in one line and before building anything, what a careless or hostile file could do:
+bytes that are not UTF-8, a file too large, nesting too deep for the parser's recursion,
+aliases that expand past a bound ("billion laughs"), a key given twice."""
 
 from pathlib import Path
 from typing import Any
@@ -9,10 +12,21 @@ from bilba_dist.errors import TaskError
 
 Location = tuple[str | int, ...]
 
+#: A task or jobs file larger than this is refused unread [bytes].
+MAX_FILE_BYTES = 2 * 2**20
+#: Nesting deeper than this is refused (PyYAML's composer recurses per level).
+MAX_DEPTH = 50
+#: Nodes after expanding every alias: the built-in tasks have ~1 000.
+MAX_NODES = 200_000
+
+_OPEN = (yaml.MappingStartEvent, yaml.SequenceStartEvent)
+_CLOSE = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
+
 
 def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, int]]:
     """Parse ``text``; return the data and a map from key path to 1-based line number."""
     try:
+        _check_shape(text, source)
         node = yaml.compose(text, Loader=yaml.SafeLoader)
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
@@ -22,20 +36,59 @@ def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, in
         raise TaskError(f"{where}: not valid YAML: {problem}") from None
     lines: dict[Location, int] = {}
     if node is not None:
-        _index(node, (), lines)
+        _index(node, (), lines, source)
     return data, lines
 
 
-def _index(node: yaml.Node, path: Location, lines: dict[Location, int]) -> None:
+def _check_shape(text: str, source: str) -> None:
+    """Walk the parser's events (iterative, nothing built): nesting depth, and the node
+    count with every alias expanded (an anchor's size is known when its node closes)."""
+    sizes: dict[str, int] = {}
+    anchors: list[str | None] = [None]  # per open collection, and the document
+    counts = [0]  # values inside each, aliases expanded
+    for event in yaml.parse(text, Loader=yaml.SafeLoader):
+        line = event.start_mark.line + 1 if event.start_mark else 0
+        if isinstance(event, _OPEN):
+            if len(counts) > MAX_DEPTH:
+                raise TaskError(f"{source}:{line}: nested deeper than {MAX_DEPTH} levels")
+            anchors.append(event.anchor)
+            counts.append(1)
+        elif isinstance(event, _CLOSE):
+            anchor, size = anchors.pop(), counts.pop()
+            counts[-1] += size
+            if anchor is not None:
+                sizes[anchor] = size
+        elif isinstance(event, yaml.AliasEvent):
+            counts[-1] += sizes.get(event.anchor or "", 1)
+        elif isinstance(event, yaml.ScalarEvent):
+            counts[-1] += 1
+            if event.anchor is not None:
+                sizes[event.anchor] = 1
+        if sum(counts) > MAX_NODES:
+            raise TaskError(
+                f"{source}:{line}: aliases expand to over {MAX_NODES} values; write the "
+                "repeated parts out, or anchor smaller pieces"
+            )
+
+
+def _index(node: yaml.Node, path: Location, lines: dict[Location, int], source: str) -> None:
     lines.setdefault(path, node.start_mark.line + 1)
     if isinstance(node, yaml.MappingNode):
+        seen: dict[Any, int] = {}
         for key, value in node.value:
+            line = key.start_mark.line + 1
+            if key.value in seen and key.tag != "tag:yaml.org,2002:merge":
+                dotted = ".".join(str(p) for p in (*path, key.value))
+                raise TaskError(
+                    f"{source}:{line}: duplicate key {dotted!r} (first at line {seen[key.value]})"
+                )
+            seen.setdefault(key.value, line)
             child = (*path, key.value)
-            lines[child] = key.start_mark.line + 1
-            _index(value, child, lines)
+            lines[child] = line
+            _index(value, child, lines, source)
     elif isinstance(node, yaml.SequenceNode):
         for i, value in enumerate(node.value):
-            _index(value, (*path, i), lines)
+            _index(value, (*path, i), lines, source)
 
 
 def line_of(location: Location, lines: dict[Location, int]) -> int | None:
@@ -50,8 +103,19 @@ def line_of(location: Location, lines: dict[Location, int]) -> int | None:
     return best
 
 
-def read_text(path: Path) -> str:
+def read_text(path: Path, what: str = "task file", limit: int = MAX_FILE_BYTES) -> str:
+    """The file's text, which must be UTF-8 and at most ``limit`` bytes."""
     try:
-        return path.read_text(encoding="utf-8")
+        size = path.stat().st_size
+        if size > limit:
+            raise TaskError(f"{path}: {size} bytes, over the {limit} byte limit for a {what}")
+        data = path.read_bytes()
     except OSError as exc:
-        raise TaskError(f"{path}: cannot read task file: {exc.strerror or exc}") from None
+        raise TaskError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        utf16 = data[:2] in (b"\xff\xfe", b"\xfe\xff")
+        kind = "UTF-16 text" if utf16 else f"byte 0x{data[exc.start]:02X} is not UTF-8"
+        raise TaskError(f"{path}:{line}: not UTF-8 ({kind}); save the {what} as UTF-8") from None
