@@ -21,6 +21,8 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.start import check_start_free
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import Variant
 from bilba_dist.task.loader import Task, describe_error, load_task
@@ -102,7 +104,8 @@ def load_jobs(path: Path) -> Batch:
         where = str(beside) if beside.is_file() else task
         for setting, bounds in spec.uncertainty.items():
             try:
-                tasks[(task, setting)] = load_task(where, bounds)
+                tasks[(task, setting)] = loaded = load_task(where, bounds)
+                check_start_free(loaded, initial_belief(loaded))
             except BilbaError as exc:
                 raise BilbaError(f"{source}: task {task!r}, setting {setting!r}: {exc}") from None
     jobs = [

@@ -1,5 +1,6 @@
 """The `bilba` command: one module per sub-command, errors as one line and exit code 2."""
 
+import os
 import sys
 from collections.abc import Callable
 from functools import wraps
@@ -16,8 +17,13 @@ F = TypeVar("F", bound=Callable[..., Any])
 EXIT_BAD_INPUT = 2
 
 
+#: Exit code for a failure of bilba itself (a bug): one line, the traceback with BILBA_DEBUG=1.
+EXIT_INTERNAL = 3
+
+
 def user_errors(command: F) -> F:
-    """Turn a BilbaError into one line on stderr and exit code 2, never a traceback."""
+    """Turn a BilbaError into one line on stderr and exit code 2, never a traceback; any
+    other exception is a bug of ours, also one line (exit 3) unless BILBA_DEBUG is set."""
 
     @wraps(command)
     def wrapper(*args: Any, **kwargs: Any) -> Any:
@@ -26,6 +32,16 @@ def user_errors(command: F) -> F:
         except BilbaError as exc:
             click.echo(f"bilba: error: {exc}", err=True)
             sys.exit(EXIT_BAD_INPUT)
+        except (Exception, RecursionError) as exc:
+            if os.environ.get("BILBA_DEBUG"):
+                raise
+            message = str(exc).splitlines()[0] if str(exc) else ""
+            click.echo(
+                f"bilba: internal error: {type(exc).__name__}: {message} (a bug: please report "
+                "it; BILBA_DEBUG=1 shows the traceback)",
+                err=True,
+            )
+            sys.exit(EXIT_INTERNAL)
 
     return wrapper  # type: ignore[return-value]
 

@@ -1,6 +1,31 @@
 """Options shared by the sub-commands that take a TASK."""
 
+import math
+
 import click
+
+
+class Bounded(click.ParamType):
+    """A finite number within [low, high] (click's FloatRange lets NaN through)."""
+
+    def __init__(self, low: float, high: float, kind: type = float, unit: str = "") -> None:
+        self.low, self.high, self.kind, self.unit = low, high, kind, unit
+        self.name = f"{kind.__name__} in [{low:g}, {high:g}]{unit}"
+
+    def convert(self, value, param, ctx):
+        try:
+            number = self.kind(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number", param, ctx)
+        if not math.isfinite(number) or not self.low <= number <= self.high:
+            self.fail(
+                f"{value} is not within [{self.low:g}, {self.high:.10g}]{self.unit}", param, ctx
+            )
+        return number
+
+
+SEED = Bounded(0, 2**32 - 1, int)
+TIMEOUT_S = Bounded(1e-3, 7 * 86400, float, " s")
 
 task_argument = click.argument("task", metavar="TASK")
 uncertainty_option = click.option(
@@ -14,7 +39,7 @@ uncertainty_option = click.option(
 
 workers_option = click.option(
     "--workers",
-    type=int,
+    type=Bounded(0, 1024, int),
     default=2,
     show_default=True,
     help="Ray rollout actors on a local Ray instance (or the cluster); 0 runs in-process.",

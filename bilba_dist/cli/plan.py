@@ -6,8 +6,12 @@ from pathlib import Path
 
 import click
 
+from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.start import check_start_free
 from bilba_dist.cli.main import user_errors
 from bilba_dist.cli.options import (
+    SEED,
+    TIMEOUT_S,
     split_uncertainty,
     task_argument,
     uncertainty_option,
@@ -26,13 +30,13 @@ EXIT_NO_PLAN = 1
 @task_argument
 @click.option("--planner", type=click.Choice(PLANNERS), default="bilba-variable", show_default=True)
 @uncertainty_option
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=SEED, default=0, show_default=True)
 @click.option(
     "--out",
     type=click.Path(dir_okay=False, path_type=Path),
     help="Plan file to write [default: plans/TASK-PLANNER-sSEED.json].",
 )
-@click.option("--timeout", type=float, help="Overall planning timeout [s] (task default: 900).")
+@click.option("--timeout", type=TIMEOUT_S, help="Overall planning timeout [s] (task default: 900).")
 @workers_option
 @click.option(
     "--model",
@@ -51,6 +55,11 @@ EXIT_NO_PLAN = 1
     help="MCAP log [default: logs/TASK-PLANNER-sSEED-TIME.mcap].",
 )
 @click.option("--no-log", is_flag=True, help="Write no log.")
+@click.option(
+    "--allow-start-contact",
+    is_flag=True,
+    help="Plan even if a particle's part starts inside the environment (refused by default).",
+)
 @user_errors
 def plan_command(
     task: str,
@@ -64,6 +73,7 @@ def plan_command(
     address: str | None,
     log_path: Path | None,
     no_log: bool,
+    allow_start_contact: bool,
 ) -> None:
     """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
     from tqdm import tqdm
@@ -72,6 +82,8 @@ def plan_command(
     from workers.rollout_worker import RolloutWorker
 
     loaded = load_task(task, split_uncertainty(uncertainty))
+    if not allow_start_contact:
+        check_start_free(loaded, initial_belief(loaded))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"

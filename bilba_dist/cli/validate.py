@@ -6,7 +6,7 @@ import click
 
 from bilba_dist.belief.particles import initial_belief, make_particle, random_offsets
 from bilba_dist.cli.main import user_errors
-from bilba_dist.cli.options import workers_option
+from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plan.file import read_plan
 from bilba_dist.plan.replay import replay, success_fraction
@@ -18,14 +18,14 @@ from bilba_dist.task.loader import build_task, load_task
 @click.option("--task", "task_name", help="Task name or file [default: the plan's task].")
 @click.option(
     "--held-out",
-    type=int,
+    type=Bounded(0, 10_000, int),
     default=0,
     show_default=True,
     help="Extra particles drawn inside the uncertainty bounds.",
 )
-@click.option("--friction-scale", type=float, default=1.0, show_default=True)
+@click.option("--friction-scale", type=Bounded(0.01, 10), default=1.0, show_default=True)
 @click.option(
-    "--seed", type=int, default=0, show_default=True, help="Seed for the held-out particles."
+    "--seed", type=SEED, default=0, show_default=True, help="Seed for the held-out particles."
 )
 @workers_option
 @user_errors
