@@ -29,6 +29,9 @@ from bilba_dist.task.loader import Task, describe_error, load_task
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.task.yaml_lines import load_yaml_with_lines, read_text
 
+#: Seeds per cell of a jobs file.
+MAX_SEEDS = 10_000
+
 
 def _task_bounds() -> dict[str, list[str]]:
     return {"task": []}
@@ -39,14 +42,14 @@ def _default_planners() -> list[Variant]:
 
 
 class JobsSpec(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
     name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$")
     tasks: list[str] = Field(min_length=1)
     uncertainty: dict[str, list[str]] = Field(default_factory=_task_bounds)
     planners: list[Variant] = Field(default_factory=_default_planners, min_length=1)
     seeds: int | list[int] = 1
-    timeout_s: float = Field(default=900.0, gt=0)
+    timeout_s: float = Field(default=900.0, gt=0, le=7 * 86400)
     model: Literal["panda", "floating"] = "panda"
 
     @field_validator("uncertainty")
@@ -58,6 +61,15 @@ class JobsSpec(BaseModel):
         if not value:
             raise ValueError("give at least one setting ([] keeps the task file's bounds)")
         return value
+
+    @field_validator("seeds")
+    @classmethod
+    def _seed_range(cls, seeds: int | list[int]) -> int | list[int]:
+        count = seeds if isinstance(seeds, int) else len(seeds)
+        listed = [] if isinstance(seeds, int) else seeds
+        if not 1 <= count <= MAX_SEEDS or not all(0 <= s < 2**32 for s in listed):
+            raise ValueError(f"give 1 to {MAX_SEEDS} seeds, each in [0, 2^32)")
+        return seeds
 
     @property
     def seed_list(self) -> list[int]:

@@ -1,0 +1,246 @@
+"""Hostile and careless input: every bad task, plan or jobs file is one line on stderr and
+exit code 2, within 5 s, and nothing partial is written (no plan file, no log, no batch)."""
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bilba_dist.task.loader import builtin_tasks
+from tests.test_task_files import run_cli
+
+PEG = builtin_tasks()["peg-in-hole"].read_text()
+BOMB = "".join(
+    f"{b}: &{b} [{', '.join([f'*{a}'] * 9)}]\n" for a, b in zip("abcdefgh", "bcdefghi", strict=True)
+)
+
+
+def edited(old: str, new: str) -> str:
+    assert old in PEG, old
+    return PEG.replace(old, new, 1)
+
+
+#: case -> (task file text or bytes, a fragment the one line must hold)
+TASKS: dict[str, tuple[str | bytes, str]] = {
+    "NaN box size": (edited("size: [0.06, 0.06, 0.15]", "size: [.nan, 0.06, 0.15]"), "size"),
+    "NaN grasp": (
+        edited("grasp: {xyz: [0, 0, 0.155]", "grasp: {xyz: [0, .nan, 0.155]"),
+        "grasp.xyz",
+    ),
+    "infinite env pose": (
+        edited("environment_pose: {xyz: [0.5, 0, 0]}", "environment_pose: {xyz: [.inf, 0, 0]}"),
+        "environment_pose.xyz",
+    ),
+    "infinite bound": (edited("grasp.pitch: 2deg", "grasp.pitch: .inf"), "finite"),
+    "NaN bound": (edited("grasp.pitch: 2deg", "grasp.pitch: .nan"), "finite"),
+    "infinite friction": (edited("friction: 0.45", "friction: .inf"), "friction"),
+    "friction 50": (edited("friction: 0.45", "friction: 50"), "friction"),
+    "time step 1e6": (
+        edited("planner:                # the", "planner:\n  sim_timestep_s: 1e6\n  #"),
+        "sim_timestep_s",
+    ),
+    "duplicate friction": (
+        edited("friction: 0.45", "friction: 0.45\nfriction: 0.9"),
+        "duplicate key 'friction'",
+    ),
+    "duplicate goal": (
+        edited(
+            "goal: {env: floor/+z", "goal: {env: wall_px/top, manip: peg/-z}\ngoal: {env: floor/+z"
+        ),
+        "duplicate key 'goal'",
+    ),
+    "alias bomb": (
+        PEG
+        + "extra:\n  a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]\n"
+        + "".join("  " + line + "\n" for line in BOMB.splitlines()),
+        "aliases expand",
+    ),
+    "Latin-1": (PEG.replace("Square peg", "Carré peg").encode("latin-1"), "not UTF-8"),
+    "UTF-16": (PEG.encode("utf-16"), "UTF-16"),
+    "deep nesting": (PEG + "extra: " + "[" * 5000 + "]" * 5000 + "\n", "nested deeper"),
+    "100001 points": (edited("generator: axis ", "points: 100001\n  generator: axis "), "points"),
+    "1 km bound": (edited("grasp.pitch: 2deg", "grasp.x: 1000m"), "outside"),
+    "720 degree bound": (edited("grasp.pitch: 2deg", "grasp.pitch: 720deg"), "outside"),
+    "start inside": (
+        edited("gripper: {xyz: [0.5, 0, 0.36]", "gripper: {xyz: [0.55, 0, 0.30]"),
+        "inside the environment",
+    ),
+    "mass 1 t": (edited("name: peg\n  pieces:", "name: peg\n  mass: 1000\n  pieces:"), "mass"),
+    "huge file": (PEG + "#" * (3 * 2**20) + "\n", "byte limit"),
+}
+
+
+def assert_one_line_exit_2(result, fragment: str, elapsed: float) -> None:
+    assert result.exit_code == 2, (result.exit_code, result.output)
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("bilba: error: ") and fragment in lines[0], lines[0]
+    assert "Traceback" not in result.output
+    assert elapsed < 5.0, elapsed
+
+
+@pytest.mark.parametrize("case", TASKS)
+def test_a_hostile_task_file_is_one_line_and_writes_nothing(case, tmp_path):
+    text, fragment = TASKS[case]
+    path = tmp_path / "task.yaml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    plan, log = tmp_path / "plan.json", tmp_path / "log.mcap"
+    start = time.perf_counter()
+    result = run_cli("plan", str(path), "--workers", "0", "--out", str(plan), "--log", str(log))
+    assert_one_line_exit_2(result, fragment, time.perf_counter() - start)
+    assert not plan.exists() and not log.exists()
+
+
+def test_a_start_inside_the_environment_may_be_allowed(tmp_path):
+    path = tmp_path / "task.yaml"
+    path.write_text(TASKS["start inside"][0])  # type: ignore[arg-type]
+    result = run_cli("graph", str(path))  # graph plans nothing: the start is not checked
+    assert result.exit_code == 0
+    from bilba_dist.belief.particles import initial_belief
+    from bilba_dist.belief.start import check_start_free
+    from bilba_dist.task.loader import load_task
+
+    check_start_free(load_task("peg-in-hole"), initial_belief(load_task("peg-in-hole")))
+    plan = tmp_path / "p.json"
+    run = run_cli(
+        "plan",
+        str(path),
+        "--workers",
+        "0",
+        "--no-log",
+        "--out",
+        str(plan),
+        "--timeout",
+        "0.5",
+        "--allow-start-contact",
+    )
+    assert run.exit_code in (0, 1) and plan.exists(), run.output
+
+
+@pytest.mark.parametrize("option", ["grasp.x=nan", "grasp.x=1e999m", "grasp.pitch=400deg"])
+def test_a_hostile_uncertainty_option_is_one_line(option, tmp_path):
+    start = time.perf_counter()
+    result = run_cli(
+        "plan",
+        "peg-in-hole",
+        "-u",
+        option,
+        "--workers",
+        "0",
+        "--out",
+        str(tmp_path / "p.json"),
+        "--no-log",
+    )
+    assert_one_line_exit_2(result, "--uncertainty", time.perf_counter() - start)
+    assert not (tmp_path / "p.json").exists()
+
+
+@pytest.mark.parametrize("args", [["--timeout", "nan"], ["--timeout", "-1"], ["--seed", "-1"]])
+def test_hostile_numbers_on_the_command_line_are_refused(args, tmp_path):
+    result = run_cli("plan", "peg-in-hole", *args, "--out", str(tmp_path / "p.json"))
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "is not within" in result.stderr and not (tmp_path / "p.json").exists()
+
+
+@pytest.fixture(scope="module")
+def plan_text(tmp_path_factory) -> str:
+    """A real plan of the default task (in-process), as its file's text."""
+    out = tmp_path_factory.mktemp("plan") / "p.json"
+    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    return out.read_text()
+
+
+def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
+    doc = json.loads(text)
+    K = doc["motions"][0]["K"]
+    return {
+        "NaN in K": (text.replace(json.dumps(K[0][0]), "NaN", 1), "NaN"),
+        "Infinity": (text.replace('"timeout_s": 5.0', '"timeout_s": Infinity', 1), "Infinity"),
+        "duplicate key": (text.replace('"seed": 0', '"seed": 0, "seed": 1', 1), "duplicate key"),
+        "deep nesting": ('{"a": ' + "[" * 100_000 + "]" * 100_000 + "}", "not a plan file"),
+        "Latin-1": (text.replace('"reason": ""', '"reason": "é"').encode("latin-1"), "not UTF-8"),
+        "K not symmetric": (
+            json.dumps({**doc, "motions": [{**doc["motions"][0], "K": [[1] * 6, *K[1:]]}]}),
+            "symmetric",
+        ),
+        "G_d far away": (
+            text.replace('"xyz": [', '"xyz": [1e9, ', 1).replace(
+                '"xyz": [1e9, ', '"xyz": [1e9, 0, 0], "was": [', 1
+            ),
+            "malformed",
+        ),
+        "future version": (text.replace('"version": 1', '"version": 99', 1), "version 99"),
+        "huge file": (text + " " * (17 * 2**20), "byte limit"),
+    }
+
+
+def test_hostile_plan_files_are_one_line(plan_text, tmp_path):
+    for case, (content, fragment) in plan_cases(plan_text).items():
+        path = tmp_path / f"{case}.json"
+        path.write_bytes(content if isinstance(content, bytes) else content.encode())
+        start = time.perf_counter()
+        result = run_cli("validate", str(path), "--workers", "0")
+        try:
+            assert_one_line_exit_2(result, fragment, time.perf_counter() - start)
+        except AssertionError as exc:
+            raise AssertionError(f"{case}: {exc}") from None
+
+
+JOBS = "name: grid\ntasks: [peg-in-hole]\nseeds: 1\ntimeout_s: 30\n"
+JOB_CASES: dict[str, tuple[str | bytes, str]] = {
+    "NaN timeout": (JOBS.replace("timeout_s: 30", "timeout_s: .nan"), "timeout_s"),
+    "duplicate key": (JOBS + "seeds: 2\n", "duplicate key 'seeds'"),
+    "alias bomb": (
+        JOBS
+        + "x:\n  a: &a [1, 2, 3, 4, 5, 6, 7, 8, 9]\n"
+        + "".join("  " + ln + "\n" for ln in BOMB.splitlines()),
+        "aliases expand",
+    ),
+    "Latin-1": ((JOBS + "# é\n").encode("latin-1"), "not UTF-8"),
+    "bad bound": (JOBS + "uncertainty: {far: [grasp.x=5000m]}\n", "outside"),
+    "a billion seeds": (JOBS.replace("seeds: 1", "seeds: 1000000000"), "seeds"),
+}
+
+
+@pytest.mark.parametrize("case", JOB_CASES)
+def test_a_hostile_jobs_file_is_one_line_and_runs_nothing(case, tmp_path):
+    content, fragment = JOB_CASES[case]
+    path = tmp_path / "jobs.yaml"
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    out = tmp_path / "batch"
+    start = time.perf_counter()
+    result = run_cli("batch", str(path), "--workers", "1", "--out", str(out))
+    assert_one_line_exit_2(result, fragment, time.perf_counter() - start)
+    assert not out.exists() or not any(out.iterdir())
+
+
+@pytest.mark.parametrize("case", ["alias bomb", "UTF-16"])
+def test_the_installed_command_refuses_fast(case, tmp_path):
+    """The same through the `bilba` entry point, start-up included."""
+    text, fragment = TASKS[case]
+    path = tmp_path / "task.yaml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    start = time.perf_counter()
+    done = subprocess.run(
+        [
+            str(Path(sys.executable).parent / "bilba"),
+            "plan",
+            str(path),
+            "--workers",
+            "0",
+            "--out",
+            str(tmp_path / "p.json"),
+            "--log",
+            str(tmp_path / "l.mcap"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert time.perf_counter() - start < 5.0
+    assert done.returncode == 2 and done.stderr.count("\n") == 1 and fragment in done.stderr
+    assert list(tmp_path.iterdir()) == [path]
