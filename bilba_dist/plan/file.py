@@ -166,7 +166,7 @@ def _rotation(G_d: dict[str, Any]) -> np.ndarray:
     quat.normalize()
     if "rotation" not in G_d:
         return quat.matrix()
-    R = _array(G_d["rotation"], (3, 3), "G_d.rotation")
+    R = np.array(G_d["rotation"], dtype=float)  # NaN fails the allclose below
     if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=ROTATION_TOL):
         raise ValueError("G_d rotation must be a 3x3 rotation matrix")
     if not np.allclose(R, quat.matrix(), atol=ROTATION_TOL):
