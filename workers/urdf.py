@@ -2,11 +2,11 @@
 joints made fixed, and the part as one more link fixed to the hand at ``X_GM``.
 
 A link of the robot is rigid by construction (a fixed constraint drifts and slows physics by
-1.7×: docs/physics.md). Box pieces are exact box shapes; other pieces are convex meshes, which
-PyBullet's URDF loader gives a fixed collision margin of 1 mm (the shape collides as the hull
-grown by 1 mm, and `changeDynamics` cannot change it on a link). So each mesh is written
-inset by that margin: the hull grown back is the piece, exact on its faces, with edges and
-corners rounded to 1 mm (as box shapes are).
+1.7×). Box pieces are exact box shapes; other pieces are convex meshes, which PyBullet's URDF
+loader gives a fixed collision margin of 1 mm (the shape collides as the hull grown by 1 mm,
+and `changeDynamics` cannot change it on a link). So each mesh is written inset by that
+margin: the hull grown back is the piece, exact on its faces, with edges and corners rounded
+to 1 mm (as box shapes are).
 """
 
 import re
