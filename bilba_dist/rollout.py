@@ -28,7 +28,7 @@ def _frozen(array: np.ndarray | Sequence[float] | None, shape: tuple[int, ...]) 
 
 
 @lru_cache(maxsize=1024)
-def _is_psd(K_bytes: bytes) -> bool:
+def is_symmetric_psd(K_bytes: bytes) -> bool:
     """Whether the 6×6 matrix (as bytes) is symmetric positive semi-definite. Cached: a
     contact's candidate motions share one K, and an eigendecomposition costs ~80 µs."""
     K = np.frombuffer(K_bytes).reshape(6, 6)
@@ -47,7 +47,7 @@ class Motion:
 
     def __post_init__(self) -> None:
         K = _frozen(self.K, (6, 6))
-        if not _is_psd(K.tobytes()):
+        if not is_symmetric_psd(K.tobytes()):
             raise ValueError("stiffness K must be symmetric positive semi-definite")
         object.__setattr__(self, "K", K)
         if self.timeout_s <= 0:

@@ -17,13 +17,12 @@ from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import setpoint_json
 from bilba_dist.planning.result import PlannedMotion, PlanResult
-from bilba_dist.rollout import _is_psd
+from bilba_dist.rollout import is_symmetric_psd
 from bilba_dist.task.loader import Task
+from bilba_dist.task.schema import MAX_MOTION_TIMEOUT_S
 from bilba_dist.task.units import WORKSPACE_M
 from bilba_dist.task.yaml_lines import read_text
 
-#: The longest motion a plan file may hold [s] (the task schema's motion_timeout_s cap).
-MAX_MOTION_S = 60.0
 FORMAT = "bilba-plan"
 VERSION = 1
 #: How far a G_d rotation may be from orthonormal, or from its quaternion, in a plan file.
@@ -133,14 +132,14 @@ def read_plan(path: Path) -> PlanFile:
 
 def _read_motion(m: dict[str, Any]) -> PlannedMotion:
     K = _array(m["K"], (6, 6), "K")
-    if not _is_psd(K.tobytes()):
+    if not is_symmetric_psd(K.tobytes()):
         raise ValueError("K must be symmetric positive semi-definite")
     G_d = pin.SE3(_rotation(m["G_d"]), _array(m["G_d"]["xyz"], (3,), "G_d.xyz"))
     if np.abs(G_d.translation).max() > WORKSPACE_M:
         raise ValueError(f"G_d.xyz {G_d.translation.tolist()} is outside ±{WORKSPACE_M} m")
     timeout = float(m["timeout_s"])
-    if not 0 < timeout <= MAX_MOTION_S:
-        raise ValueError(f"timeout_s must be in (0, {MAX_MOTION_S}] s, got {timeout}")
+    if not 0 < timeout <= MAX_MOTION_TIMEOUT_S:
+        raise ValueError(f"timeout_s must be in (0, {MAX_MOTION_TIMEOUT_S:g}] s, got {timeout}")
     contact = ContactPair(str(m["contact"]["env"]), str(m["contact"]["manip"]))
     q_d = _array(m["q_d"], (7,), "q_d")
     return PlannedMotion(K, G_d, q_d, timeout, contact, float(m["score"]))

@@ -48,8 +48,7 @@ def prism(outline: Outline, z0: float, z1: float) -> list[list[float]]:
 def _ring(polygon: Polygon) -> np.ndarray:
     """A polygon's corners, counter-clockwise, without the closing repeat or collinear
     points."""
-    ring = np.array(orient(polygon.simplify(0), 1.0).exterior.coords)[:-1]
-    return ring
+    return np.array(orient(polygon.simplify(0), 1.0).exterior.coords)[:-1]
 
 
 def _grown(outline: np.ndarray, distance: float) -> np.ndarray:

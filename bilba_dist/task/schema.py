@@ -28,6 +28,8 @@ MAX_OFFSET_M = 0.1
 MAX_OFFSET_RAD = math.pi / 4
 #: Particles in a belief: each costs a rollout per candidate motion.
 MAX_PARTICLES = 256
+#: The longest one compliant motion may run [s] (task files and plan files).
+MAX_MOTION_TIMEOUT_S = 60.0
 
 
 class Strict(BaseModel):
@@ -58,7 +60,7 @@ class MeshSpec(Strict):
     ``convex`` piece it describes, so a loaded task carries the vertices, not the path."""
 
     file: str = Field(min_length=1)
-    scale: float = Field(default=1.0, gt=0, allow_inf_nan=False)
+    scale: float = Field(default=1.0, gt=0)
     faces: dict[str, tuple[float, float, float]] = Field(
         default_factory=dict, description="face name -> outward normal in the piece frame"
     )
@@ -198,7 +200,7 @@ class PlannerParams(Strict):
     # authors always run gp_rounds: set gp_patience = gp_rounds for their behaviour).
     gp_patience: int = Field(default=1, ge=1, le=100)
     gp_restarts: int = Field(default=9, ge=0, le=100)
-    motion_timeout_s: float = Field(default=5.0, gt=0, le=60)
+    motion_timeout_s: float = Field(default=5.0, gt=0, le=MAX_MOTION_TIMEOUT_S)
     # PyBullet at 240 Hz (PHYSICS.md: 500/1000 Hz gave the same outcomes at 2×/4× the cost);
     # the authors used 0.005 s in Drake.
     sim_timestep_s: float = Field(default=1 / 240, ge=1e-4, le=0.02)

@@ -25,18 +25,22 @@ _CLOSE = (yaml.MappingEndEvent, yaml.SequenceEndEvent)
 
 def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, int]]:
     """Parse ``text``; return the data and a map from key path to 1-based line number."""
+    lines: dict[Location, int] = {}
     try:
         _check_shape(text, source)
-        node = yaml.compose(text, Loader=yaml.SafeLoader)
-        data = yaml.safe_load(text)
+        loader = yaml.SafeLoader(text)
+        try:  # one composition serves the line index and the data
+            node = loader.get_single_node()
+            if node is not None:  # indexed first: constructing flattens merge keys in place
+                _index(node, (), lines, source)
+            data = loader.construct_document(node) if node is not None else None
+        finally:
+            loader.dispose()
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f"{source}:{mark.line + 1}" if mark is not None else source
         problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
         raise TaskError(f"{where}: not valid YAML: {problem}") from None
-    lines: dict[Location, int] = {}
-    if node is not None:
-        _index(node, (), lines, source)
     return data, lines
 
 
