@@ -190,9 +190,9 @@ def _free_port() -> int:
 
 @pytest.mark.slow
 def test_a_batch_submitted_with_ray_job_submit_completes(tmp_path):
-    """`ray start --head`, then `ray job submit -- bilba batch …` (DESIGN.md: Ray 2.60 needs
-    RAY_AUTH_MODE=token on the submitting side). `ray stop` at the end stops every Ray
-    process of this user, so this test must not share the machine with another Ray."""
+    """`ray start --head`, then `ray job submit -- bilba batch …` (docs/reference-values.md:
+    Ray 2.60 needs RAY_AUTH_MODE=token on the submitting side). `ray stop` at the end stops
+    every Ray process of this user, so this test must not share the machine with another Ray."""
     env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
     port, dashboard = _free_port(), _free_port()
     subprocess.run(

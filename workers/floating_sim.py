@@ -2,8 +2,8 @@
 that the Panda's controller applies at the gripper, with gravity compensated exactly.
 
 It has a virtual inertia near the Panda's effective one (its real 1e-4 kg·m² with rotational
-damping blows up under explicit integration: PHYSICS.md). Faster than the Panda model; plans
-made with it must be validated on the Panda model before they are returned.
+damping blows up under explicit integration: docs/physics.md). Faster than the Panda model;
+plans made with it must be validated on the Panda model before they are returned.
 """
 
 import math

@@ -1,5 +1,5 @@
-"""Numbers of the simulated controllers, with their units. Defaults follow DESIGN.md and the
-measurements in PHYSICS.md."""
+"""Numbers of the simulated controllers, with their units. Defaults follow
+docs/reference-values.md and the measurements in docs/physics.md."""
 
 from dataclasses import dataclass
 

@@ -1,12 +1,13 @@
 """B-EST, the paper's baseline: a belief-space expansive tree with no contact schedule.
 
-With the authors' settings (DESIGN.md): nodes are beliefs, binned on a density grid over the
-belief's mean manipuland pose (10 bins per position axis over a workspace box around the
-environment, 4 per quaternion component). To expand, pick a random occupied cell, then a
-random node in it — sparse regions get expanded as often as dense ones — and apply a random
-relative twist of the mean gripper pose (rotation ±0.02 rad, translation ±0.04 m per axis)
-with the "stiff" gains for a timeout uniform in [0, 4] s. A child is kept if its mean stays
-in the workspace; the search ends when every particle has the goal contact.
+With the authors' settings (docs/reference-values.md): nodes are beliefs, binned on a
+density grid over the belief's mean manipuland pose (10 bins per position axis over a
+workspace box around the environment, 4 per quaternion component). To expand, pick a random
+occupied cell, then a random node in it — sparse regions get expanded as often as dense ones
+— and apply a random relative twist of the mean gripper pose (rotation ±0.02 rad,
+translation ±0.04 m per axis) with the "stiff" gains for a timeout uniform in [0, 4] s. A
+child is kept if its mean stays in the workspace; the search ends when every particle has
+the goal contact.
 
 Expansions go out ``batch`` at a time (nodes and controls drawn first, then all their
 rollouts in one call), so Ray workers have work to share; the tree, and so the plan, depends

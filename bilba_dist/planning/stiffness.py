@@ -19,7 +19,7 @@ from bilba_dist.task.loader import Task
 
 @dataclass(frozen=True)
 class Gains:
-    """Authors' values (DESIGN.md)."""
+    """Authors' values (docs/reference-values.md)."""
 
     rot_stiff: float = 100.0
     rot_soft: float = 60.0

@@ -1,7 +1,8 @@
 """Writing one planning job's MCAP log, crash-safe: unchunked records, flushed per message.
 
 mcap's Python writer keeps a chunk in memory until it is full or `finish()` runs, so a
-killed process loses it (DESIGN.md: 2557 of 3000 messages survived with 64 KiB chunks);
+killed process loses it (docs/reference-values.md: 2557 of 3000 messages survived with
+64 KiB chunks);
 unchunked writing plus a flush after every message keeps every completed record.
 """
 

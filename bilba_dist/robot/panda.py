@@ -17,7 +17,7 @@ from bilba_dist.errors import UnreachableError
 ARM_JOINTS = tuple(f"panda_joint{i}" for i in range(1, 8))
 FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
 HAND = "panda_hand"
-#: Torque limits of the seven arm joints [N·m] (Franka's datasheet; DESIGN.md).
+#: Torque limits of the seven arm joints [N·m] (Franka's datasheet; docs/reference-values.md).
 TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
 #: A comfortable mid-range posture: the IK's joint-centring target.
 Q_CENTRE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])

@@ -1,7 +1,8 @@
 """The task file, as typed models. Unknown keys and wrong types are errors.
 
 Lengths accept ``m cm mm`` and angles ``deg rad`` (bare numbers are metres and radians).
-Planner parameters default to the values of the authors' implementation (DESIGN.md).
+Planner parameters default to the values of the authors' implementation
+(docs/reference-values.md).
 """
 
 import math
@@ -157,7 +158,7 @@ BeliefSpec = Annotated[
 
 
 class PlannerParams(Strict):
-    """Defaults from the authors' implementation (DESIGN.md)."""
+    """Defaults from the authors' implementation (docs/reference-values.md)."""
 
     n_free: int = Field(default=3, ge=1, le=100)
     delta_proj: float = Field(default=1e-4, ge=0, le=1)
@@ -201,7 +202,8 @@ class PlannerParams(Strict):
     gp_patience: int = Field(default=1, ge=1, le=100)
     gp_restarts: int = Field(default=9, ge=0, le=100)
     motion_timeout_s: float = Field(default=5.0, gt=0, le=MAX_MOTION_TIMEOUT_S)
-    # PyBullet at 240 Hz (PHYSICS.md: 500/1000 Hz gave the same outcomes at 2×/4× the cost);
+    # PyBullet at 240 Hz (docs/physics.md: 500/1000 Hz gave the same outcomes at 2×/4× the
+    # cost);
     # the authors used 0.005 s in Drake.
     sim_timestep_s: float = Field(default=1 / 240, ge=1e-4, le=0.02)
     # Panda: move the joint reference through IK waypoints on the hand's straight line
