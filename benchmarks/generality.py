@@ -33,9 +33,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from bilba_dist.belief.particles import initial_belief, make_particle, random_offsets
-from bilba_dist.plan.replay import replay, success_fraction
 from bilba_dist.planning.bilba import plan
+from bilba_dist.plans.replay import validate_plan
 from bilba_dist.task.loader import load_task
 from bilba_dist.task.prismatic import peg_in_hole_task, prism, rectangle, regular_polygon
 
@@ -86,7 +85,7 @@ def write_task(folder: Path, shape: str, planner: dict) -> Path:
 
 def run_one(job: tuple[str, str, str, int, float, int]) -> dict:
     """Plan one (task file, setting, seed) in-process; replay a plan on held-out draws."""
-    from workers.rollout_worker import RolloutWorker
+    from bilba_dist.workers.rollout_worker import RolloutWorker
 
     label, task_path, bound, seed, timeout, held_out = job
     task = load_task(task_path, [bound])
@@ -103,11 +102,9 @@ def run_one(job: tuple[str, str, str, int, float, int]) -> dict:
         "reason": result.reason,
     }
     if result.success and held_out:
-        bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
-        extra = [make_particle(task, o) for o in random_offsets(bounds, held_out, 1)]
-        final = replay(task, result.motions, extra, backend)
-        row["held_out"] = round(success_fraction(final, task), 3)
-        row["planning_particles"] = len(initial_belief(task))
+        check = validate_plan(task, result.motions, backend, held_out, seed=1)
+        row["held_out"] = round(check.held_out or 0.0, 3)
+        row["planning_particles"] = check.n_planning
     return row
 
 

@@ -25,7 +25,7 @@ from typing import Any
 from bilba_dist.planning.bilba import plan
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.task.loader import load_task
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 
 class Timed:

@@ -24,10 +24,10 @@ import statistics
 import sys
 
 from bilba_dist.planning.bilba import PLANNERS, plan
+from bilba_dist.schedulers.session import ray_session
 from bilba_dist.task.loader import load_task, with_planner
-from schedulers.session import ray_session
-from workers.pool import RayPool
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.pool import RayPool
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 SETTINGS = {
     "peg-pitch": ("peg-in-hole", "grasp.pitch=2deg"),

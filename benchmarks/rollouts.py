@@ -25,8 +25,8 @@ from bilba_dist.belief.particles import initial_belief
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutRequest
 from bilba_dist.task.loader import load_task
-from workers.rollout_worker import RolloutWorker
-from workers.settings import SimSettings
+from bilba_dist.workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.settings import SimSettings
 
 WALL_TOP, HOLE_BOTTOM, PEG_HALF, GRASP = 0.10, 0.04, 0.075, 0.155
 VERY_STIFF = np.diag([100.0, 100.0, 100.0, 600.0, 600.0, 600.0])

@@ -34,12 +34,12 @@ from cpu_split import GROUPS, TimedBackend, batch_speedup, cpu_seconds, serial_b
 from planning import SETTINGS  # benchmarks/planning.py: name -> (task, uncertainty)
 
 from bilba_dist.planning.bilba import plan
+from bilba_dist.schedulers.batch import run_batch
+from bilba_dist.schedulers.jobs import load_jobs
+from bilba_dist.schedulers.session import ray_session
 from bilba_dist.task.loader import load_task
-from schedulers.batch import run_batch
-from schedulers.jobs import load_jobs
-from schedulers.session import ray_session
-from workers.pool import RayPool
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.pool import RayPool
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 
 def one_plan(name: str, bound: str, seeds: int) -> tuple[dict[str, list[float]], dict]:

@@ -24,9 +24,9 @@ from pathlib import Path
 from typing import Any
 
 from bilba_dist.errors import BilbaError
+from bilba_dist.schedulers.jobs import Batch, Job
 from bilba_dist.task.loader import build_task
 from bilba_dist.task.schema import TaskSpec
-from schedulers.jobs import Batch, Job
 
 RECORDS = "records.jsonl"
 #: Ray re-runs a job this many times after a system failure (a dead node or process).
@@ -35,20 +35,22 @@ JOB_RETRIES = 3
 
 def execute_job(job: Job, spec: TaskSpec, source: str) -> dict[str, Any]:
     """Plan one job in this process; return its outcome, plan text and log bytes."""
-    from bilba_dist.plan.file import dumps, plan_document
     from bilba_dist.planning.bilba import plan
+    from bilba_dist.plans.file import dumps, plan_document
     from bilba_dist.record.writer import LogWriter
-    from workers.rollout_worker import RolloutWorker
+    from bilba_dist.workers.rollout_worker import RolloutWorker
 
     task = build_task(spec, source)
-    worker = RolloutWorker(task, job.model)  # type: ignore[arg-type]
+    worker = RolloutWorker(task, job.model)
     panda = RolloutWorker(task, "panda") if job.model == "floating" else None
     with tempfile.TemporaryDirectory() as folder:
-        log = LogWriter(Path(folder) / "log.mcap", task, job.planner, job.seed)
+        log = LogWriter(
+            Path(folder) / "log.mcap", task, job.planner, job.seed, job.model == "panda"
+        )
         result = plan(
             task,
             worker,
-            job.planner,  # type: ignore[arg-type]
+            job.planner,
             job.seed,
             job.timeout_s,
             recorder=log,
@@ -142,7 +144,7 @@ def run_batch(
     """Run every job of ``batch`` not yet recorded in ``out``; return the counts."""
     import ray
 
-    from schedulers.session import ray_session
+    from bilba_dist.schedulers.session import ray_session
 
     recorded = {r["id"] for r in read_records(out)}
     if recorded and not resume:

@@ -25,6 +25,7 @@ from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import check_start_free
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import Variant
+from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, describe_error, load_task
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.task.yaml_lines import load_yaml_with_lines, read_text
@@ -84,10 +85,10 @@ class Job:
     task: str  # as written in the jobs file
     setting: str
     uncertainty: tuple[str, ...]
-    planner: str
+    planner: Variant
     seed: int
     timeout_s: float
-    model: str
+    model: DynamicsModel
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from bilba_dist.errors import BilbaError
-from schedulers.batch import RECORDS, read_records
+from bilba_dist.schedulers.batch import RECORDS, read_records
 
 
 @dataclass(frozen=True)

@@ -61,7 +61,7 @@ def rollout_backend(
 ) -> Iterator[RolloutBackend]:
     """``workers`` = 0 runs in-process; otherwise a pool of that many Ray actors."""
     if workers == 0:
-        from workers.rollout_worker import RolloutWorker
+        from bilba_dist.workers.rollout_worker import RolloutWorker
 
         worker = RolloutWorker(task, model)
         try:
@@ -69,7 +69,7 @@ def rollout_backend(
         finally:
             worker.close()
         return
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     with ray_session(workers, address):
         pool = RayPool(task, workers, model)

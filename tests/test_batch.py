@@ -15,8 +15,8 @@ import pytest
 from click.testing import CliRunner
 
 from bilba_dist.cli.main import cli, register
-from schedulers.batch import RECORDS, read_records, run_batch
-from schedulers.jobs import load_jobs
+from bilba_dist.schedulers.batch import RECORDS, read_records, run_batch
+from bilba_dist.schedulers.jobs import load_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "deploy" / "jobs" / "smoke.yaml"  # 4 jobs: peg pitch, 2 planners × 2 seeds

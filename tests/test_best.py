@@ -8,12 +8,12 @@ import pytest
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import start_belief
-from bilba_dist.plan.file import plan_document, read_plan, write_plan
-from bilba_dist.plan.replay import replay
 from bilba_dist.planning.best import POSITION_BINS, QUATERNION_BINS, _cell, mean_pose, workspace
 from bilba_dist.planning.bilba import plan
+from bilba_dist.plans.file import plan_document, read_plan, write_plan
+from bilba_dist.plans.replay import replay
 from bilba_dist.task.loader import load_task
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 FLAT = str(Path(__file__).parent / "data" / "flat.yaml")
 

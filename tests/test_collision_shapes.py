@@ -13,9 +13,9 @@ import yaml
 from bilba_dist.geometry.piece import ConvexPiece, Part
 from bilba_dist.task.loader import Task, load_task
 from bilba_dist.task.prismatic import peg_in_hole_task, rectangle, regular_polygon
-from workers.floating_sim import FloatingSim
-from workers.panda_sim import PandaSim
-from workers.settings import SimSettings
+from bilba_dist.workers.floating_sim import FloatingSim
+from bilba_dist.workers.panda_sim import PandaSim
+from bilba_dist.workers.settings import SimSettings
 
 #: How far the probe points sit outside each face [m], and the agreement asked for [m].
 PROBE_OUT_M = (0.002, 0.0003)

@@ -13,8 +13,8 @@ import yaml
 from bilba_dist.planning.bilba import plan
 from bilba_dist.task.loader import builtin_tasks, load_task
 from bilba_dist.task.prismatic import prism, regular_polygon
+from bilba_dist.workers.rollout_worker import RolloutWorker
 from tests.test_task_files import run_cli
-from workers.rollout_worker import RolloutWorker
 
 
 @pytest.fixture

@@ -11,8 +11,8 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.rollout import Motion, RolloutRequest
 from bilba_dist.task.loader import load_task, with_planner
-from workers.rollout_worker import RolloutWorker
-from workers.settings import SimSettings
+from bilba_dist.workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.settings import SimSettings
 
 VERY_STIFF = np.diag([100.0, 100.0, 100.0, 600.0, 600.0, 600.0])
 FLAT = "tests/data/flat.yaml"
@@ -97,7 +97,7 @@ def test_cartesian_ramp_keeps_the_hand_on_the_straight_line(nominal_peg):
     """A straight joint ramp bows the hand ~2 mm off an 8 cm descent; the IK-waypoint ramp
     stays within 0.05 mm, and both end at the joint setpoint."""
     from bilba_dist.robot.panda import Q_CENTRE
-    from workers.motion import ramp_steps
+    from bilba_dist.workers.motion import ramp_steps
 
     task, particle = nominal_peg
     X0 = task.X_WG0
@@ -254,8 +254,8 @@ def test_compiled_control_step_matches_the_impedance_law(far):
     from scipy.linalg import sqrtm
 
     from bilba_dist.robot.panda import Q_CENTRE, TORQUE_LIMITS, PandaModel
-    from workers.control_step import joint_torque
-    from workers.panda_sim import JointImpedance
+    from bilba_dist.workers.control_step import joint_torque
+    from bilba_dist.workers.panda_sim import JointImpedance
 
     rng = np.random.default_rng(7)
     model, settings = PandaModel(), SimSettings()

@@ -13,14 +13,14 @@ from bilba_dist.belief.state import LAMBDA, Belief, contact_iou, d_bel, d_bel_un
 from bilba_dist.cli.main import cli, register
 from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.modes.schedule import SliceCache
-from bilba_dist.plan.file import plan_document, read_plan, write_plan
-from bilba_dist.plan.replay import replay
 from bilba_dist.planning.bilba import furthest_common, plan
 from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
+from bilba_dist.plans.file import plan_document, read_plan, write_plan
+from bilba_dist.plans.replay import replay
 from bilba_dist.task.loader import load_task
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 A, B, C = (ContactPair(f"e/{k}", "m/-z") for k in "abc")
 

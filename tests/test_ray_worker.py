@@ -8,8 +8,8 @@ import pytest
 ray = pytest.importorskip("ray")
 
 from bilba_dist.task.loader import load_task  # noqa: E402
+from bilba_dist.workers.rollout_worker import RolloutWorker  # noqa: E402
 from tests.test_physics import fixed_motion_set  # noqa: E402
-from workers.rollout_worker import RolloutWorker  # noqa: E402
 
 
 @pytest.fixture(scope="module")
@@ -36,7 +36,7 @@ def test_ray_actor_gives_bit_identical_rollouts(local_ray):
 
 def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_ray):
     from bilba_dist.planning.bilba import plan
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
     local = plan(task, RolloutWorker(task, "panda"), seed=4)
@@ -53,7 +53,7 @@ def test_seeded_plan_is_the_same_in_process_and_on_one_or_two_ray_workers(local_
 
 
 def test_a_pool_on_the_first_actor_shares_it_and_closing_it_kills_nothing(local_ray):
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     requests = fixed_motion_set(task, 4, seed=6)
@@ -79,7 +79,7 @@ def _same(results, expected):
 def test_prefetched_rollouts_are_the_ones_asked_for_next(local_ray):
     """A pool of two runs the guessed next batch on an idle actor; asked for next, those
     results are reused (not rerun) and equal what in-process rollouts give."""
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     first, then = fixed_motion_set(task, 2, seed=7), fixed_motion_set(task, 6, seed=8)
@@ -92,7 +92,7 @@ def test_prefetched_rollouts_are_the_ones_asked_for_next(local_ray):
 
 
 def test_guesses_not_asked_for_are_dropped_and_one_actor_does_not_guess(local_ray):
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     first, unused = fixed_motion_set(task, 2, seed=7), fixed_motion_set(task, 6, seed=8)
@@ -114,7 +114,7 @@ def test_killing_a_worker_process_mid_plan_still_gives_the_same_plan(local_ray):
     import signal
 
     from bilba_dist.planning.bilba import Progress, plan
-    from workers.pool import RayPool
+    from bilba_dist.workers.pool import RayPool
 
     task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
     local = plan(task, RolloutWorker(task, "panda"), seed=4)

@@ -3,7 +3,11 @@
 Between two PyBullet calls each numpy call costs 2–4× what a warm micro-benchmark says
 (stepSimulation evicts the interpreter's caches), so the step's arithmetic — the gain
 product, the spring-wrench clip, gravity and the torque limits — is one compiled call
-(benchmarks/HISTORY.md, Rollouts)."""
+(benchmarks/HISTORY.md, Rollouts).
+
+Numba caches the compiled step beside this file, keyed by the file's time stamp and size, and
+the cache names the module it was compiled from (`bilba_dist.workers.control_step` since the
+folder installs inside the library): editing this file is what invalidates a stale cache."""
 
 import math
 

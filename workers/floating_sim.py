@@ -18,10 +18,16 @@ import pybullet as p
 from bilba_dist.geometry.piece import Part
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.motion import SimStats, damping, label_final_contacts, ramp_poses, ramp_steps
-from workers.scene import EnvironmentBodies, connect, quat_xyzw
-from workers.settings import SimSettings
-from workers.urdf import write_obj
+from bilba_dist.workers.motion import (
+    SimStats,
+    damping,
+    label_final_contacts,
+    ramp_poses,
+    ramp_steps,
+)
+from bilba_dist.workers.scene import EnvironmentBodies, connect, quat_xyzw
+from bilba_dist.workers.settings import SimSettings
+from bilba_dist.workers.urdf import write_obj
 
 
 def part_compound(part: Part, client: int) -> int:

@@ -10,8 +10,8 @@ import pinocchio as pin
 from bilba_dist.geometry.contact import ContactSet
 from bilba_dist.geometry.labels import label_points
 from bilba_dist.geometry.piece import Part
-from workers.scene import EnvironmentBodies
-from workers.settings import SimSettings
+from bilba_dist.workers.scene import EnvironmentBodies
+from bilba_dist.workers.settings import SimSettings
 
 
 @dataclass

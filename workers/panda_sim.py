@@ -19,11 +19,17 @@ from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.control_step import joint_torque
-from workers.motion import SimStats, damping, label_final_contacts, ramp_poses, ramp_steps
-from workers.scene import EnvironmentBodies, connect
-from workers.settings import SimSettings
-from workers.urdf import PART_LINK, panda_with_part, part_centre
+from bilba_dist.workers.control_step import joint_torque
+from bilba_dist.workers.motion import (
+    SimStats,
+    damping,
+    label_final_contacts,
+    ramp_poses,
+    ramp_steps,
+)
+from bilba_dist.workers.scene import EnvironmentBodies, connect
+from bilba_dist.workers.settings import SimSettings
+from bilba_dist.workers.urdf import PART_LINK, panda_with_part, part_centre
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from typing import Any
 
 from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
 from bilba_dist.task.loader import Task
-from workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.rollout_worker import RolloutWorker
 
 #: Ray tasks in flight per actor: one running, one queued behind it, so an actor never
 #: waits a round trip for its next task.

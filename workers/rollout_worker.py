@@ -18,9 +18,9 @@ import pinocchio as pin
 from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
 from bilba_dist.task.loader import Task, build_task
 from bilba_dist.task.schema import TaskSpec
-from workers.floating_sim import FloatingSim
-from workers.panda_sim import PandaSim
-from workers.settings import SimSettings
+from bilba_dist.workers.floating_sim import FloatingSim
+from bilba_dist.workers.panda_sim import PandaSim
+from bilba_dist.workers.settings import SimSettings
 
 
 def grasp_key(X_GM: pin.SE3) -> bytes:

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.errors import BilbaError
 
 #: Exit code when the driver was interrupted (jobs recorded so far are kept).
@@ -35,8 +35,8 @@ def batch(
     jobs_file: Path, out: Path | None, resume: bool, workers: int, address: str | None
 ) -> None:
     """Run every job of a grid; one JSON-lines record, plan and MCAP log per finished job."""
-    from schedulers.batch import progress_bar, run_batch
-    from schedulers.jobs import load_jobs
+    from bilba_dist.schedulers.batch import progress_bar, run_batch
+    from bilba_dist.schedulers.jobs import load_jobs
 
     if workers < 1:
         raise BilbaError("--workers: a batch needs at least 1")
@@ -67,7 +67,7 @@ def batch(
 @user_errors
 def report(folder: Path, png: Path | None) -> None:
     """The paper-style table of a batch folder (median ± MAD time, successes) and a PNG."""
-    from schedulers.report import report as make_report
+    from bilba_dist.schedulers.report import report as make_report
 
     text, written = make_report(folder, png)
     click.echo(text)

@@ -5,7 +5,7 @@ from pathlib import Path
 import click
 
 from bilba_dist.belief.particles import initial_belief
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import FREE

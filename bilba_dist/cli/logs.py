@@ -5,7 +5,7 @@ from pathlib import Path
 
 import click
 
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.errors import BilbaError
 from bilba_dist.record import inspect
 from bilba_dist.record.inspect import mode_text

@@ -8,7 +8,7 @@ import click
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import check_start_free
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import (
     SEED,
     TIMEOUT_S,
@@ -17,10 +17,11 @@ from bilba_dist.cli.options import (
     uncertainty_option,
     workers_option,
 )
-from bilba_dist.plan.file import dumps, plan_document, write_plan
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
+from bilba_dist.plans.file import dumps, plan_document, write_plan
 from bilba_dist.record.writer import LogWriter
+from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task
 
 EXIT_NO_PLAN = 1
@@ -69,7 +70,7 @@ def plan_command(
     out: Path | None,
     timeout: float | None,
     workers: int,
-    model: str,
+    model: DynamicsModel,  # click.Choice of the two
     address: str | None,
     log_path: Path | None,
     no_log: bool,
@@ -78,8 +79,8 @@ def plan_command(
     """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
     from tqdm import tqdm
 
-    from schedulers.session import rollout_backend
-    from workers.rollout_worker import RolloutWorker
+    from bilba_dist.schedulers.session import rollout_backend
+    from bilba_dist.workers.rollout_worker import RolloutWorker
 
     loaded = load_task(task, split_uncertainty(uncertainty))
     if not allow_start_contact:
@@ -87,9 +88,9 @@ def plan_command(
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
-    log = None if no_log else LogWriter(log_path, loaded, planner, seed)
+    log = None if no_log else LogWriter(log_path, loaded, planner, seed, model == "panda")
     with (
-        rollout_backend(loaded, workers, address, model) as backend,  # type: ignore[arg-type]
+        rollout_backend(loaded, workers, address, model) as backend,
         tqdm(unit=" rollouts", file=sys.stderr, dynamic_ncols=True) as bar,
     ):
 

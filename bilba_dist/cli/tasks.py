@@ -2,7 +2,7 @@
 
 import click
 
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.task.loader import builtin_tasks, load_task
 
 

@@ -4,12 +4,11 @@ from pathlib import Path
 
 import click
 
-from bilba_dist.belief.particles import initial_belief, make_particle, random_offsets
-from bilba_dist.cli.main import user_errors
+from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
-from bilba_dist.plan.file import read_plan
-from bilba_dist.plan.replay import replay, success_fraction
+from bilba_dist.plans.file import read_plan
+from bilba_dist.plans.replay import validate_plan
 from bilba_dist.task.loader import build_task, load_task
 
 
@@ -46,21 +45,16 @@ def validate(
     if friction_scale != 1.0:
         spec = task.spec.model_copy(update={"friction": task.spec.friction * friction_scale})
         task = build_task(spec, task.source)
-    planning = initial_belief(task)
-    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
-    extra = tuple(make_particle(task, o) for o in random_offsets(bounds, held_out, seed))
-    from schedulers.session import rollout_backend  # imports pybullet: after input checks
+    from bilba_dist.schedulers.session import (
+        rollout_backend,  # imports pybullet: after input checks
+    )
 
     with rollout_backend(task, workers) as backend:
-        final = replay(task, plan.motions, planning + extra, backend)
-    n = len(planning)
-    planned = final[:n]
+        result = validate_plan(task, plan.motions, backend, held_out, seed)
     click.echo(f"plan       {plan_path} ({len(plan.motions)} motions, task {task.name})")
-    click.echo(f"planning belief: {success_fraction(planned, task):.3f} of {n} reach {task.goal}")
-    if held_out:
-        rest = final[n:]
-        fraction = success_fraction(rest, task)
+    click.echo(f"planning belief: {result.planning:.3f} of {result.n_planning} reach {task.goal}")
+    if result.held_out is not None:
         click.echo(
-            f"held out:        {fraction:.3f} of {held_out} (seed {seed}, "
+            f"held out:        {result.held_out:.3f} of {held_out} (seed {seed}, "
             f"friction x{friction_scale:g})"
         )

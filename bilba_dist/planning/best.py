@@ -25,7 +25,7 @@ import pinocchio as pin
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
-from bilba_dist.planning.make_contact import Step
+from bilba_dist.planning.make_contact import Step, planned_motions
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.robot.panda import PandaModel
@@ -157,7 +157,6 @@ def _finish(
     result: PlanResult, nodes: list[Node], leaf: int, task: Task, recorder: Recorder
 ) -> None:
     """The motions from the root to ``leaf`` are the plan."""
-    from bilba_dist.planning.bilba import planned_motions
 
     goal = frozenset([task.goal])
     edges: list[tuple[int, int]] = []  # (parent, child), leaf first

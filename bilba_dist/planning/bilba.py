@@ -16,19 +16,20 @@ from bilba_dist.errors import NoScheduleError
 from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.modes.graph import ModeGraph
 from bilba_dist.modes.schedule import SliceCache, belief_graph
+from bilba_dist.planning.best import plan_best
 from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.gp import GPParams
 from bilba_dist.planning.make_contact import (
     ContactOutcome,
     ContactSearch,
     PlanningTimeoutError,
-    Step,
     StiffnessRule,
     make_contact,
+    planned_motions,
     race,
 )
 from bilba_dist.planning.recorder import NullRecorder, Recorder
-from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.planning.result import PlanResult
 from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import fixed_stiffness, variable_stiffness
 from bilba_dist.robot.panda import PandaModel
@@ -65,8 +66,6 @@ def plan(
     model), a plan is returned only if replaying it there brings every particle to the goal."""
     progress = progress or Progress()
     if variant == "b-est":
-        from bilba_dist.planning.best import plan_best
-
         result = plan_best(task, backend, seed, timeout_s, recorder, lambda n: _count(progress, n))
         if result.success and validate_on is not None:
             b0 = start_belief(task, initial_belief(task))
@@ -143,7 +142,7 @@ def contact_search(
 
 
 def _validate(task: Task, result: PlanResult, b0: Belief, backend: RolloutBackend) -> None:
-    from bilba_dist.plan.replay import replay
+    from bilba_dist.plans.replay import replay
 
     final = replay(task, result.motions, b0.particles, backend)
     reached = sum(task.goal in c for c in final.contacts)
@@ -242,20 +241,6 @@ def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
 
 def _positions(belief: Belief) -> np.ndarray:
     return np.array([belief.X_OM(i).translation for i in range(len(belief))])
-
-
-def planned_motions(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
-    """Attach the joint setpoint (IK from the nominal particle's start) to each motion."""
-    q = b0.states[0].q
-    planned = []
-    for step in steps:
-        q = panda.ik(step.motion.G_d, q)
-        planned.append(
-            PlannedMotion(
-                step.motion.K, step.motion.G_d, q, step.motion.timeout_s, step.contact, step.score
-            )
-        )
-    return planned
 
 
 def _stiffness_rule(task: Task, variant: Variant) -> StiffnessRule:

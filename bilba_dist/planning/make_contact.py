@@ -13,7 +13,9 @@ from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
 from bilba_dist.planning.gp import GPParams, features, propose
 from bilba_dist.planning.recorder import NullRecorder, Recorder
+from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
+from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import Motion
 
 #: ``stiffness(belief, mode, rng)`` → 6×6 K for the next motion.
@@ -220,3 +222,17 @@ def _check(search: ContactSearch) -> None:
 
 def _report(search: ContactSearch, mode: ContactPair, best: Scored | None) -> None:
     search.on_progress(str(mode), best.score if best is not None else 0.0)
+
+
+def planned_motions(steps: list[Step], b0: Belief, panda: PandaModel) -> list[PlannedMotion]:
+    """Attach the joint setpoint (IK from the nominal particle's start) to each motion."""
+    q = b0.states[0].q
+    planned = []
+    for step in steps:
+        q = panda.ik(step.motion.G_d, q)
+        planned.append(
+            PlannedMotion(
+                step.motion.K, step.motion.G_d, q, step.motion.timeout_s, step.contact, step.score
+            )
+        )
+    return planned

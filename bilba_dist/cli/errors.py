@@ -1,0 +1,46 @@
+"""How every `bilba` sub-command fails: bad input as one line and exit code 2, a bug of ours
+as one line and exit code 3 (the traceback with BILBA_DEBUG=1)."""
+
+import os
+import sys
+from collections.abc import Callable
+from functools import wraps
+from typing import Any, TypeVar
+
+import click
+
+from bilba_dist.errors import BilbaError
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: Exit code for bad input (a malformed task, an impossible goal, a missing file).
+EXIT_BAD_INPUT = 2
+
+
+#: Exit code for a failure of bilba itself (a bug): one line, the traceback with BILBA_DEBUG=1.
+EXIT_INTERNAL = 3
+
+
+def user_errors(command: F) -> F:
+    """Turn a BilbaError into one line on stderr and exit code 2, never a traceback; any
+    other exception is a bug of ours, also one line (exit 3) unless BILBA_DEBUG is set."""
+
+    @wraps(command)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return command(*args, **kwargs)
+        except BilbaError as exc:
+            click.echo(f"bilba: error: {exc}", err=True)
+            sys.exit(EXIT_BAD_INPUT)
+        except (Exception, RecursionError) as exc:
+            if os.environ.get("BILBA_DEBUG"):
+                raise
+            message = str(exc).splitlines()[0] if str(exc) else ""
+            click.echo(
+                f"bilba: internal error: {type(exc).__name__}: {message} (a bug: please report "
+                "it; BILBA_DEBUG=1 shows the traceback)",
+                err=True,
+            )
+            sys.exit(EXIT_INTERNAL)
+
+    return wrapper  # type: ignore[return-value]

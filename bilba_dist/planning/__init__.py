@@ -1,0 +1,1 @@
+"""The planners: BILBA (bilevel) and B-EST (the baseline), their searches and results."""
