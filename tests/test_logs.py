@@ -1,19 +1,27 @@
 """MCAP logs of real plans: readable with CRCs, schema-valid, the same plan, crash-safe."""
 
+import hashlib
 import json
 import os
 import signal
 import subprocess
 import sys
-import time
+from pathlib import Path
 
 import jsonschema
+import numpy as np
+import pinocchio as pin
 import pytest
 from click.testing import CliRunner
-from mcap.reader import make_reader
+from mcap.data_stream import ReadDataStream
+from mcap.reader import NonSeekingReader, SeekingReader, make_reader
+from mcap.records import MessageIndex
 
+import bilba_dist.record
 from bilba_dist.cli.main import cli, register
+from bilba_dist.record.foxglove import PRIMITIVES
 from bilba_dist.record.reader import read_log
+from bilba_dist.robot.panda import PandaModel
 
 
 def run(*args: str):
@@ -76,40 +84,79 @@ def test_summary_names_task_planner_and_outcome(planned):
     assert "plan found" in result.output and "schedule 0: free ->" in result.output
 
 
-def test_killed_planner_leaves_a_readable_log_and_recover_makes_it_whole(tmp_path):
+def indexed_messages(path) -> dict[str, int]:
+    """Messages per topic as an indexed reader finds them: through the summary's chunk indexes
+    and each chunk's message indexes only (an unchunked file has none: no messages)."""
+    counts: dict[str, int] = {}
+    with path.open("rb") as f:
+        summary = SeekingReader(f).get_summary()
+        assert summary is not None
+        for chunk in summary.chunk_indexes:
+            for channel_id, offset in chunk.message_index_offsets.items():
+                f.seek(offset + 1 + 8)  # past the record's opcode and length
+                index = MessageIndex.read(ReadDataStream(f))
+                topic = summary.channels[channel_id].topic
+                counts[topic] = counts.get(topic, 0) + len(index.records)
+    return counts
+
+
+def test_an_indexed_reader_finds_every_message(planned):
+    _, log = planned
+    streamed: dict[str, int] = {}
+    with log.open("rb") as f:
+        for _, channel, _ in NonSeekingReader(f, validate_crcs=True).iter_messages():
+            streamed[channel.topic] = streamed.get(channel.topic, 0) + 1
+    assert indexed_messages(log) == streamed
+    assert sum(streamed.values()) > 50
+
+
+#: A planner whose log hook reports each transition once it has returned: every transition
+#: reported before the kill must survive it.
+KILLED_PLANNER = """
+import sys
+from pathlib import Path
+from pathlib import Path
+from bilba_dist.planning.bilba import plan
+from bilba_dist.record.writer import LogWriter
+from bilba_dist.task.loader import load_task
+from bilba_dist.workers.rollout_worker import RolloutWorker
+
+class Reporting(LogWriter):
+    def transition(self, *args, **kwargs):
+        super().transition(*args, **kwargs)
+        print(self.transitions, flush=True)
+
+task = load_task("peg-in-hole", ["grasp.x=1cm"])
+plan(task, RolloutWorker(task), seed=0, recorder=Reporting(Path(sys.argv[1]), task, "v", 0))
+"""
+
+
+def test_killed_planner_loses_at_most_the_transition_in_progress(tmp_path):
     log = tmp_path / "killed.mcap"
     proc = subprocess.Popen(
-        [
-            sys.executable,
-            "-c",
-            "from bilba_dist.cli.main import main; main()",
-            "plan",
-            "peg-in-hole",
-            "-u",
-            "grasp.x=1cm",
-            "--workers",
-            "0",
-            "--log",
-            str(log),
-            "--out",
-            str(tmp_path / "p.json"),
-        ],
-        stdout=subprocess.DEVNULL,
+        [sys.executable, "-c", KILLED_PLANNER, str(log)],
+        stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
+        text=True,
     )
-    deadline = time.time() + 120
-    while time.time() < deadline and (not log.exists() or log.stat().st_size < 80_000):
-        time.sleep(0.2)
+    assert proc.stdout is not None
+    reported = 0
+    for line in proc.stdout:
+        reported = int(line)
+        if reported >= 6:
+            break
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait()
+    assert reported >= 6, "the planner ended before six transitions"
     assert run("logs", "summary", str(log)).exit_code == 2  # truncated: no summary section
     fixed = tmp_path / "fixed.mcap"
     result = run("logs", "recover", str(log), "--out", str(fixed))
     assert result.exit_code == 0, result.output
     recovered = read_log(fixed)
     transitions = recovered.json("/transition")
-    assert len(transitions) >= 3
+    assert len(transitions) >= reported
     assert [t["index"] for t in transitions] == list(range(len(transitions)))
+    assert indexed_messages(fixed)["/transition"] == len(transitions)
 
 
 @pytest.mark.parametrize("case", ["missing", "empty", "text", "truncated"])
@@ -135,7 +182,40 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
         assert len(lines) == 1 and "Traceback" not in result.stderr
 
 
-def test_foxglove_scene_draws_every_particle_and_its_frames_follow_the_plan(planned):
+def official_schema(name: str) -> dict:
+    folder = Path(bilba_dist.record.__file__).parent / "foxglove_schemas"
+    return json.loads((folder / f"{name}.json").read_text())
+
+
+def test_the_shipped_foxglove_schemas_are_the_current_official_ones():
+    """Unchanged from @foxglove/schemas 2.1.0 (hashes in the folder's README); that version
+    requires every primitive list of a SceneEntity, the check our old subset missed."""
+    folder = Path(bilba_dist.record.__file__).parent / "foxglove_schemas"
+    readme = (folder / "README.md").read_text()
+    for name in ("SceneUpdate", "FrameTransform"):
+        digest = hashlib.sha256((folder / f"{name}.json").read_bytes()).hexdigest()
+        assert f"{digest}  {name}.json" in readme
+    entity = official_schema("SceneUpdate")["properties"]["entities"]["items"]
+    assert set(PRIMITIVES) <= set(entity["required"])
+
+
+def test_every_scene_and_tf_message_is_valid_under_the_official_foxglove_schemas(planned):
+    _, log_path = planned
+    validators = {
+        "/scene": jsonschema.Draft7Validator(official_schema("SceneUpdate")),
+        "/tf": jsonschema.Draft7Validator(official_schema("FrameTransform")),
+    }
+    log = read_log(log_path)
+    checked = 0
+    for topic, validator in validators.items():
+        for message in log.json(topic):
+            errors = [e.message for e in validator.iter_errors(message)]
+            assert errors == [], (topic, errors[:3])
+            checked += 1
+    assert checked > 100
+
+
+def test_foxglove_scene_draws_parts_and_arm_of_every_particle_and_follows_the_plan(planned):
     _, log_path = planned
     schemas = {}
     with log_path.open("rb") as f:
@@ -144,20 +224,34 @@ def test_foxglove_scene_draws_every_particle_and_its_frames_follow_the_plan(plan
     assert schemas == {"/scene": "foxglove.SceneUpdate", "/tf": "foxglove.FrameTransform"}
     log = read_log(log_path)
     scene = log.json("/scene")[0]
-    assert sorted(e["id"] for e in scene["entities"]) == [
-        "env/0", "env/1", "env/2", "part/0", "part/1", "part/2",
-    ]  # fmt: skip
+    bodies = ["link0", "link1", "link2", "link3", "link4", "link5", "link6", "link7", "hand",
+              "leftfinger", "rightfinger"]  # fmt: skip
+    assert sorted(e["id"] for e in scene["entities"]) == sorted(
+        [f"{kind}_{i}" for kind in ("env", "part") for i in range(3)]
+        + [f"panda_{i}/{body}" for body in bodies for i in range(3)]
+    )
     for entity in scene["entities"]:
         (mesh,) = entity["triangles"]
-        assert entity["frame_id"] == entity["id"].replace("/", "_") and entity["frame_locked"]
+        assert entity["frame_id"] == entity["id"] and entity["frame_locked"]
         assert len(mesh["indices"]) % 3 == 0 and max(mesh["indices"]) < len(mesh["points"])
-    # The last transform of each manipuland frame is that particle after the last motion.
+    # The last transforms of each particle's frames are that particle after the last motion:
+    # the part at its pose, the hand where the arm's joint angles put it.
     last = {tf["child_frame_id"]: tf for tf in log.json("/tf")}
     final = [t for t in log.json("/transition") if t["accepted"]][-1]["after"]
+    panda = PandaModel()
     for i, particle in enumerate(final):
         tf = last[f"part_{i}"]
         assert [tf["translation"][k] for k in "xyz"] == particle["X_WM"]["xyz"]
         assert [tf["rotation"][k] for k in "xyzw"] == pytest.approx(particle["X_WM"]["quat_xyzw"])
+        hand = last[f"panda_{i}/hand"]
+        X_WG = panda.fk(np.array(particle["q"]))
+        assert [hand["translation"][k] for k in "xyz"] == pytest.approx(X_WG.translation, abs=1e-9)
+        quat = pin.Quaternion(X_WG.rotation)
+        assert [hand["rotation"][k] for k in "xyzw"] == pytest.approx(
+            [quat.x, quat.y, quat.z, quat.w], abs=1e-9
+        ) or [hand["rotation"][k] for k in "xyzw"] == pytest.approx(
+            [-quat.x, -quat.y, -quat.z, -quat.w], abs=1e-9
+        )
     assert all(tf["parent_frame_id"] == "world" for tf in last.values())
 
 

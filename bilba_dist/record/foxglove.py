@@ -1,100 +1,47 @@
 """The belief as a 3-D scene in Foxglove's well-known JSON schemas.
 
-One frame per particle and part: ``env_i`` (the environment at particle ``i``'s ``X_WO``) and
-``part_i`` (its manipuland at ``X_WM``), both children of ``world`` by ``foxglove.FrameTransform``
-on ``/tf``. ``/scene`` (``foxglove.SceneUpdate``) draws each part as a triangle list locked to
-its frame, so the transforms alone animate the scene. Foxglove recognises a JSON channel by
-its schema *name*; the schemas below are the subset of the official ones we fill (same field
-names and types, so a message valid here is valid there).
+One frame per particle and part: ``env_i`` (the environment at particle ``i``'s ``X_WO``),
+``part_i`` (its manipuland at ``X_WM``) and, on the Panda model, ``panda_i/BODY`` for each of
+the arm's collision bodies (from the particle's joint angles), all children of ``world`` by
+``foxglove.FrameTransform`` on ``/tf``. ``/scene`` (``foxglove.SceneUpdate``) draws each as a
+triangle list locked to its frame, so the transforms alone animate the scene. Foxglove
+recognises a JSON channel by its schema *name*; the log carries the official schemas, and every
+message is valid under them (tests/test_logs.py).
 """
 
+import json
 from collections.abc import Sequence
+from importlib.resources import files
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from bilba_dist.geometry.piece import Part
+from bilba_dist.record.panda_scene import panda_bodies, panda_shapes
 
 
-def _numbers(keys: str) -> dict[str, Any]:
-    """An object of required numbers, one per letter of ``keys`` (vector, quaternion, colour)."""
-    return {
-        "type": "object",
-        "properties": {k: {"type": "number"} for k in keys},
-        "required": list(keys),
-    }
+def _official(name: str) -> dict[str, Any]:
+    return json.loads(
+        (files("bilba_dist.record") / "foxglove_schemas" / f"{name}.json").read_text()
+    )
 
 
-_VEC3 = _numbers("xyz")
-_QUAT = _numbers("xyzw")
-_TIME = {
-    "type": "object",
-    "properties": {
-        "sec": {"type": "integer", "minimum": 0},
-        "nsec": {"type": "integer", "minimum": 0, "maximum": 999_999_999},
-    },
-    "required": ["sec", "nsec"],
-}
-_COLOR = _numbers("rgba")
-_POSE = {
-    "type": "object",
-    "properties": {"position": _VEC3, "orientation": _QUAT},
-    "required": ["position", "orientation"],
-}
-_TRIANGLES = {
-    "type": "object",
-    "properties": {
-        "pose": _POSE,
-        "points": {"type": "array", "items": _VEC3},
-        "color": _COLOR,
-        "colors": {"type": "array", "items": _COLOR},
-        "indices": {"type": "array", "items": {"type": "integer", "minimum": 0}},
-    },
-    "required": ["pose", "points", "color", "colors", "indices"],
-}
-_ENTITY = {
-    "type": "object",
-    "properties": {
-        "timestamp": _TIME,
-        "frame_id": {"type": "string"},
-        "id": {"type": "string"},
-        "lifetime": _TIME,
-        "frame_locked": {"type": "boolean"},
-        "metadata": {"type": "array"},
-        "triangles": {"type": "array", "items": _TRIANGLES},
-    },
-    "required": ["timestamp", "frame_id", "id", "lifetime", "frame_locked", "triangles"],
-}
-
+#: The official JSON schemas (foxglove-sdk's `@foxglove/schemas`, see the folder's README),
+#: written into each log as the channel's schema.
 SCHEMAS: dict[str, dict[str, Any]] = {
-    "/scene": {
-        "title": "foxglove.SceneUpdate",
-        "type": "object",
-        "properties": {
-            "deletions": {"type": "array"},
-            "entities": {"type": "array", "items": _ENTITY},
-        },
-        "required": ["deletions", "entities"],
-    },
-    "/tf": {
-        "title": "foxglove.FrameTransform",
-        "type": "object",
-        "properties": {
-            "timestamp": _TIME,
-            "parent_frame_id": {"type": "string"},
-            "child_frame_id": {"type": "string"},
-            "translation": _VEC3,
-            "rotation": _QUAT,
-        },
-        "required": ["timestamp", "parent_frame_id", "child_frame_id", "translation", "rotation"],
-    },
+    "/scene": _official("SceneUpdate"),
+    "/tf": _official("FrameTransform"),
 }
+
+#: SceneEntity's primitive lists: every one is required, empty or not.
+PRIMITIVES = ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models")
 
 WORLD = "world"
 #: Manipuland colours, cycled over particles; the environment is grey.
 PALETTE = [(0.12, 0.47, 0.71), (1.0, 0.5, 0.05), (0.17, 0.63, 0.17), (0.84, 0.15, 0.16)]
 ENV_COLOR = (0.6, 0.6, 0.6)
+ROBOT_COLOR = (0.85, 0.85, 0.88)
 
 
 def stamp(ns: int) -> dict[str, int]:
@@ -129,11 +76,38 @@ IDENTITY = {
 }
 
 
-class SceneMessages:
-    """Builds ``/scene`` and ``/tf`` messages for one task's two parts."""
+def entity(frame: str, ns: int, points: list[dict[str, float]], indices: list[int],
+           color: dict[str, float]) -> dict[str, Any]:  # fmt: skip
+    """A SceneEntity: one triangle list locked to ``frame`` (the entity's id too)."""
+    return {
+        "timestamp": stamp(ns),
+        "frame_id": frame,
+        "id": frame,
+        "lifetime": stamp(0),
+        "frame_locked": True,
+        "metadata": [],
+        **{kind: [] for kind in PRIMITIVES},
+        "triangles": [
+            {"pose": IDENTITY, "points": points, "color": color, "colors": [], "indices": indices}
+        ],
+    }
 
-    def __init__(self, manipuland: Part, environment: Part) -> None:
+
+class SceneMessages:
+    """Builds ``/scene`` and ``/tf`` messages for one task's two parts (and the Panda)."""
+
+    def __init__(self, manipuland: Part, environment: Part, robot: bool = True) -> None:
         self._meshes = {"part": triangles(manipuland), "env": triangles(environment)}
+        self._robot = (
+            [
+                (name, [_xyz(np.round(v, 4)) for v in vertices], [int(i) for i in faces.ravel()])
+                for name, (vertices, faces) in zip(
+                    panda_bodies().names, panda_shapes(), strict=True
+                )
+            ]
+            if robot
+            else []
+        )
 
     def scene(self, n_particles: int, ns: int) -> dict[str, Any]:
         entities = []
@@ -143,26 +117,22 @@ class SceneMessages:
                 ("part", PALETTE[i % len(PALETTE)], 0.8),
             ):
                 points, indices = self._meshes[kind]
+                entities.append(entity(f"{kind}_{i}", ns, points, indices, _rgba(rgb, alpha)))
+            for name, points, indices in self._robot:
                 entities.append(
-                    {
-                        "timestamp": stamp(ns),
-                        "frame_id": f"{kind}_{i}",
-                        "id": f"{kind}/{i}",
-                        "lifetime": stamp(0),
-                        "frame_locked": True,
-                        "metadata": [],
-                        "triangles": [
-                            {
-                                "pose": IDENTITY,
-                                "points": points,
-                                "color": _rgba(rgb, alpha),
-                                "colors": [],
-                                "indices": indices,
-                            }
-                        ],
-                    }
+                    entity(f"panda_{i}/{name}", ns, points, indices, _rgba(ROBOT_COLOR, 0.3))
                 )
         return {"deletions": [], "entities": entities}
+
+    def robot_transforms(self, i: int, q: np.ndarray, ns: int) -> list[dict[str, Any]]:
+        """Particle ``i``'s arm bodies at joint angles ``q`` (none without the robot)."""
+        if not self._robot:
+            return []
+        bodies = panda_bodies()
+        return [
+            self.transform(f"panda_{i}/{name}", X, ns)
+            for name, X in zip(bodies.names, bodies.poses(q), strict=True)
+        ]
 
     @staticmethod
     def transform(child: str, X: pin.SE3, ns: int) -> dict[str, Any]:

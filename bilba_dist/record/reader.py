@@ -92,7 +92,7 @@ def recover(path: Path, out: Path) -> int:
     except Exception:
         pass
     with out.open("wb") as f:
-        writer = Writer(f, use_chunking=False, compression=CompressionType.NONE)
+        writer = Writer(f, compression=CompressionType.NONE)  # chunked: indexed readers see all
         writer.start(profile="bilba", library="bilba_dist recover")
         schema_ids = {
             sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in schemas.items()

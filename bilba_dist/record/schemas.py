@@ -22,7 +22,11 @@ SETPOINT = {  # a motion's G_d: the pose and its rotation matrix exactly as simu
 }
 PARTICLE = {
     "type": "object",
-    "properties": {"X_WM": POSE, "contacts": {"type": "array", "items": CONTACT}},
+    "properties": {
+        "X_WM": POSE,
+        "contacts": {"type": "array", "items": CONTACT},
+        "q": {**VEC, "minItems": 7, "maxItems": 7},  # arm joints [rad]; absent in older logs
+    },
     "required": ["X_WM", "contacts"],
 }
 MOTION = {

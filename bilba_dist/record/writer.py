@@ -1,9 +1,11 @@
-"""Writing one planning job's MCAP log, crash-safe: unchunked records, flushed per message.
+"""Writing one planning job's MCAP log: chunked and indexed, and crash-safe.
 
-mcap's Python writer keeps a chunk in memory until it is full or `finish()` runs, so a
-killed process loses it (docs/reference-values.md: 2557 of 3000 messages survived with
-64 KiB chunks);
-unchunked writing plus a flush after every message keeps every completed record.
+Indexed readers (what viewers use to seek, e.g. `@mcap/core`'s `McapIndexedReader`) find
+messages only through chunk indexes, so the log is chunked. mcap's Python writer keeps a chunk
+in memory until it is full or `finish()` runs, and a killed process loses it
+(docs/reference-values.md: 2557 of 3000 messages survived with 64 KiB chunks); so each
+recorder hook ends its chunk and flushes it (`Writer.flush`): a planner killed mid-plan loses
+at most the transition in progress, and `bilba logs recover` restores the rest.
 """
 
 import json
@@ -31,7 +33,11 @@ PROFILE = "bilba"
 
 def particles(belief: Belief) -> list[dict[str, Any]]:
     return [
-        {"X_WM": pose_json(s.X_WM), "contacts": sorted([list(c) for c in contacts])}
+        {
+            "X_WM": pose_json(s.X_WM),
+            "contacts": sorted([list(c) for c in contacts]),
+            "q": [float(v) for v in s.q],
+        }
         for s, contacts in zip(belief.states, belief.contacts, strict=True)
     ]
 
@@ -50,14 +56,17 @@ def versions() -> dict[str, str]:
 class LogWriter:
     """One MCAP file per planning job; implements the planner's recorder hooks."""
 
-    def __init__(self, path: Path, task: Task, planner: str, seed: int) -> None:
+    def __init__(self, path: Path, task: Task, planner: str, seed: int, robot: bool = True) -> None:
+        """``robot``: draw the Panda in the scene (its particles' joint angles are meaningful
+        only on the Panda model)."""
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._file: IO[bytes] = path.open("wb")
         except OSError as exc:
             raise BilbaError(f"{path}: cannot write log: {exc.strerror or exc}") from None
         self.path = path
-        self._writer = Writer(self._file, use_chunking=False, compression=CompressionType.NONE)
+        # Uncompressed chunks: every MCAP reader handles them without a decompressor.
+        self._writer = Writer(self._file, compression=CompressionType.NONE)
         self._writer.start(profile=PROFILE, library="bilba_dist")
         self._channels = {
             topic: self._writer.register_channel(
@@ -69,7 +78,7 @@ class LogWriter:
             )
             for topic, schema in {**TOPICS, **FOXGLOVE_SCHEMAS}.items()
         }
-        self._scene = SceneMessages(task.manipuland, task.environment)
+        self._scene = SceneMessages(task.manipuland, task.environment, robot)
         self._sequence = 0
         self.transitions = 0
         header = {
@@ -90,20 +99,26 @@ class LogWriter:
             {"task": task.name, "task_hash": task.hash, "planner": planner, "seed": str(seed)},
         )
         self.write("/metadata", header)
+        self.commit()
 
     def write(self, topic: str, message: dict[str, Any] | str, now: int | None = None) -> None:
         data = message if isinstance(message, str) else json.dumps(message, sort_keys=True)
         now = now or time.time_ns()
         self._sequence += 1
         self._writer.add_message(self._channels[topic], now, data.encode(), now, self._sequence)
-        self._file.flush()
+
+    def commit(self) -> None:
+        """End the chunk in progress and put it on disk: a kill from here loses nothing."""
+        self._writer.flush()
 
     # The planner's recorder hooks.
     def schedule(self, attempt: int, schedule: list[ContactPair]) -> None:
         self.write("/schedule", {"attempt": attempt, "schedule": [list(m) for m in schedule]})
+        self.commit()
 
     def pruned(self, edge: tuple[ContactPair, ContactPair], reason: str) -> None:
         self.write("/pruned", {"edge": [list(m) for m in edge], "reason": reason})
+        self.commit()
 
     def transition(
         self,
@@ -137,17 +152,20 @@ class LogWriter:
         self.transitions += 1
         if accepted:
             self.draw(after)
+        self.commit()
 
     def draw(self, belief: Belief) -> None:
         """The belief as a Foxglove scene, at the start and after each accepted motion: the
-        parts (again each time, so a player that seeks past the start still has them) and
-        every particle's frames."""
+        parts and the arm (again each time, so a player that seeks past the start still has
+        them) and every particle's frames."""
         now = time.time_ns()
         self.write("/scene", self._scene.scene(len(belief), now), now)
         for i, particle in enumerate(belief.particles):
             self.write("/tf", self._scene.transform(f"env_{i}", particle.X_WO, now), now)
         for i, state in enumerate(belief.states):
             self.write("/tf", self._scene.transform(f"part_{i}", state.X_WM, now), now)
+            for tf in self._scene.robot_transforms(i, state.q, now):
+                self.write("/tf", tf, now)
 
     def gp_round(
         self, mode: ContactPair, training_size: int, predicted: float, simulated: float
@@ -161,6 +179,7 @@ class LogWriter:
                 "simulated_best": simulated,
             },
         )
+        self.commit()
 
     def finish(self, plan_text: str, outcome: dict[str, Any]) -> None:
         """The plan (the plan file's exact text) and the outcome, then the summary section."""
