@@ -303,7 +303,7 @@ def test_a_four_motion_puzzle_plan_works_across_the_grasp_interval(rate_hz):
     until the part drops against the +x slot wall, drop onto the rail, slide +y until the
     neck meets the far bar. Found by hand (benchmarks/HISTORY.md, the puzzle); 9 particles,
     36 rollouts. At twice the step rate too: its success is not luck of the time step, as
-    the planner's puzzle plans' is (README, Benchmarks)."""
+    the planner's puzzle plans' is (benchmarks/README.md)."""
     task = with_planner(load_task("puzzle"), sim_timestep_s=1 / rate_hz)
     particles = [make_particle(task, {"grasp.x": dx}) for dx in np.linspace(-0.01, 0.01, 9)]
     soft_x = np.diag([100.0, 100.0, 100.0, 400.0, 600.0, 600.0])

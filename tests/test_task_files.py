@@ -4,7 +4,9 @@ import copy
 import re
 import subprocess
 import sys
+from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
@@ -243,3 +245,21 @@ def test_with_planner_replaces_and_validates_planner_parameters(peg):
         with_planner(peg, race_chunks=0)
     with pytest.raises(TaskError, match=r"^planner\.racing: Extra inputs"):
         with_planner(peg, racing=3)
+
+
+def test_the_readme_task_example_loads_with_hex_pegs_environment(tmp_path):
+    """The README's task-file example, with its elided walls filled in from hex-peg.yaml and
+    its mesh pointed at hex-peg.stl, is a valid task that matches the built-in."""
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = readme.split("```yaml\n", 1)[1].split("```", 1)[0]
+    data = yaml.safe_load(block)
+    builtin = builtin_tasks()["hex-peg"]
+    hex_peg = yaml.safe_load(builtin.read_text())
+    assert data["environment"]["pieces"] == ["..."]  # YAML reads [...] as one string
+    data["environment"]["pieces"] = hex_peg["environment"]["pieces"]
+    data["manipuland"]["pieces"][0]["mesh"]["file"] = str(builtin.parent / "hex-peg.stl")
+    task = load_task(str(write_task(tmp_path, data)))
+    reference = load_task("hex-peg")
+    assert task.goal == reference.goal
+    assert task.spec.uncertainty == reference.spec.uncertainty
+    assert np.allclose(task.manipuland.pieces[0].vertices, reference.manipuland.pieces[0].vertices)

@@ -166,7 +166,7 @@ class PlannerParams(Strict):
     # Also join two modes whose C-obs regions come within this distance [m]: the short
     # free-space move between them (a part sliding off a bar's top into a slot just beside
     # it). Vertex sharing alone misses such steps (ours; 0, the default, is the authors'
-    # graph; the puzzle sets 0.6 mm, just over its 0.5 mm side clearances; README).
+    # graph; the puzzle sets 0.6 mm, just over its 0.5 mm side clearances; docs/design.md).
     near_edge_m: float = Field(default=0.0, ge=0, le=0.05)
     n_attempts: int = Field(default=50, ge=1, le=100_000)
     # When pruning has left no schedule from free, put the pruned edges back and go on, up
@@ -208,7 +208,7 @@ class PlannerParams(Strict):
     sim_timestep_s: float = Field(default=1 / 240, ge=1e-4, le=0.02)
     # Panda: move the joint reference through IK waypoints on the hand's straight line
     # (ours; off = a straight line in joint space, which bows the hand ~2 mm on an 8 cm
-    # move). README, Physics rollouts.
+    # move). docs/physics.md.
     cartesian_ramp: bool = False
     # In contact when closer than this. The authors used 1 mm in Drake; in PyBullet a resting
     # contact sits at about -0.01 mm, and a 1 mm threshold flips on pegs resting 0.99 mm

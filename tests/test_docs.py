@@ -1,0 +1,48 @@
+"""The README and docs/: short enough for a user, every relative link lands on a file of the
+repository, and nothing cites a document that is not in it."""
+
+import re
+import subprocess
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [
+    ROOT / "README.md",
+    *sorted((ROOT / "docs").glob("*.md")),
+    ROOT / "benchmarks" / "README.md",
+]
+LINK = re.compile(r"\]\(([^)#\s]+)(#[^)\s]*)?\)")
+
+
+def test_readme_is_for_users_and_short():
+    readme = (ROOT / "README.md").read_text()
+    assert len(readme.splitlines()) <= 250
+    first_commands = [line.strip() for line in readme.splitlines() if line.startswith("    ")][:2]
+    assert first_commands[0].endswith(".venv/bin/pytest")
+    assert first_commands[1].endswith("bilba plan peg-in-hole")
+
+
+def test_every_relative_link_resolves():
+    broken = []
+    for page in PAGES:
+        for target, _ in LINK.findall(page.read_text()):
+            if re.match(r"[a-z]+://", target):
+                continue
+            if not (page.parent / target).exists():
+                broken.append(f"{page.relative_to(ROOT)} -> {target}")
+    assert broken == []
+
+
+def test_no_file_cites_a_document_outside_the_repository():
+    tracked = subprocess.run(
+        ["git", "ls-files"], cwd=ROOT, capture_output=True, text=True, check=True
+    ).stdout.split()
+    outside = re.compile(r"\.\./shared|(?<![\w/])(DESIGN|PHYSICS|STYLE)\.md")
+    hits = [
+        name
+        for name in tracked
+        if name.endswith((".py", ".md", ".yaml", ".toml", ".txt"))
+        and (ROOT / name).is_file()
+        and outside.search((ROOT / name).read_text(errors="replace"))
+    ]
+    assert hits == []
