@@ -2,8 +2,8 @@
 
 Each job is one Ray task (one CPU) that plans with its rollouts in-process: across a grid,
 jobs side by side keep every core busy with no batching overhead, where splitting one plan's
-small rollout batches over actors does not (docs/cluster.md, Scaling). The job sends its plan text and
-MCAP log back to the driver, which alone writes under DIR — so a cluster needs no shared
+small rollout batches over actors does not (docs/cluster.md, Scaling). The job sends its plan
+text and MCAP log back to the driver, which alone writes under DIR — so a cluster needs no shared
 filesystem, and a job is recorded exactly once: when its result arrives. Ray re-runs a job
 whose node or worker process died (``max_retries``); a seeded plan comes out the same.
 
