@@ -26,7 +26,7 @@ from bilba_dist.belief.start import check_start_free
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import Variant
 from bilba_dist.rollout import DynamicsModel
-from bilba_dist.task.loader import Task, describe_error, load_task
+from bilba_dist.task.loader import Task, describe_error, load_task, with_preset
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.task.yaml_lines import load_yaml_with_lines, read_text
 
@@ -52,6 +52,9 @@ class JobsSpec(BaseModel):
     seeds: int | list[int] = 1
     timeout_s: float = Field(default=900.0, gt=0, le=7 * 86400)
     model: Literal["panda", "floating"] = "panda"
+    # Planner settings for every job: paper (the authors') or default (ours); unset keeps
+    # each task file's.
+    preset: Literal["default", "paper"] | None = None
 
     @field_validator("uncertainty")
     @classmethod
@@ -117,7 +120,10 @@ def load_jobs(path: Path) -> Batch:
         where = str(beside) if beside.is_file() else task
         for setting, bounds in spec.uncertainty.items():
             try:
-                tasks[(task, setting)] = loaded = load_task(where, bounds)
+                loaded = load_task(where, bounds)
+                if spec.preset is not None:
+                    loaded = with_preset(loaded, spec.preset)
+                tasks[(task, setting)] = loaded
                 check_start_free(loaded, initial_belief(loaded))
             except BilbaError as exc:
                 raise BilbaError(f"{source}: task {task!r}, setting {setting!r}: {exc}") from None

@@ -213,3 +213,20 @@ def test_a_batch_submitted_with_ray_job_submit_completes(tmp_path):
     assert submitted.returncode == 0, submitted.stdout[-2000:] + submitted.stderr[-2000:]
     assert "4 jobs run in" in submitted.stdout and "(0 without a plan)" in submitted.stdout
     assert len(read_records(out)) == 4
+
+
+def test_a_jobs_file_preset_applies_to_every_job(tmp_path):
+    jobs = tmp_path / "jobs.yaml"
+    jobs.write_text(
+        "name: p\ntasks: [peg-in-hole, hex-peg]\nuncertainty: {pitch: [grasp.pitch=1deg]}\n"
+        "planners: [bilba-fixed]\npreset: paper\n"
+    )
+    batch = load_jobs(jobs)
+    assert len(batch.jobs) == 2
+    for job in batch.jobs:
+        planner = batch.spec(job).planner
+        assert (planner.preset, planner.race_contacts, planner.n_attempts) == ("paper", 0, 50)
+    jobs.write_text(jobs.read_text().replace("preset: paper", "preset: fastest"))
+    result = run("batch", str(jobs), "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2 and "preset" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

@@ -1,6 +1,7 @@
 """The BILBA planner end to end (real PyBullet rollouts, in-process), plan files, replay."""
 
 import json
+from collections import Counter
 
 import numpy as np
 import pinocchio as pin
@@ -383,3 +384,60 @@ def test_race_won_by_dijkstras_contact_in_its_first_chunk_changes_nothing(peg):
     assert a.contact == b.contact and a.score == b.score
     assert np.array_equal(a.motion.G_d.homogeneous, b.motion.G_d.homogeneous)
     assert np.array_equal(a.motion.K, b.motion.K)
+
+
+def test_a_search_out_of_schedules_goes_on_until_its_timeout():
+    """With the defaults (no limit on pruning rounds or attempts), a search that prunes every
+    edge out of free puts them back and tries again until the timeout, where the paper's
+    settings stop at once."""
+    from bilba_dist.task.loader import build_task, with_preset
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    cheap = {
+        "n_free": 1,
+        "setpoints_per_particle": 1,
+        "noisy_setpoints": 0,
+        "gp_rounds": 0,
+        "race_contacts": 0,
+        "motion_timeout_s": 0.01,
+    }
+    results = {}
+    for preset in ("default", "paper"):
+        preset_task = with_preset(task, preset)
+        planner = preset_task.spec.planner.model_copy(update=cheap)
+        spec = preset_task.spec.model_copy(update={"planner": planner})
+        worker = RolloutWorker(spec, "panda")
+        results[preset] = plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0, timeout_s=4)
+        worker.close()
+    ours, paper = results["default"], results["paper"]
+    assert paper.rounds == 1 and paper.reason.startswith("edges pruned until no schedule")
+    assert paper.planning_time_s < 4
+    assert ours.reason.startswith("timeout after") and ours.rounds > 2
+    assert len(ours.pruned) > len(paper.pruned)
+
+
+def test_no_plan_names_the_contact_that_blocked_it_and_why():
+    """Two setpoints per particle and no GP cannot bring the peg's three grasp.x particles onto
+    one chamfer: the reason names that chamfer and how far the best motion got."""
+    from bilba_dist.task.loader import with_planner
+
+    task = with_planner(
+        load_task("peg-in-hole", ["grasp.x=1cm"]),
+        n_attempts=3,
+        setpoints_per_particle=2,
+        noisy_setpoints=0,
+        gp_rounds=0,
+        race_contacts=0,
+    )
+    worker = RolloutWorker(task)
+    result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=120)
+    worker.close()
+    assert not result.success and len(result.blocked) == 3
+    first = result.blocked[0]
+    assert first.n == 3 and first.reached < 3 and first.no_region == 0
+    assert first.spread_m == pytest.approx(0.02, abs=1e-3)  # ±1 cm of grasp x
+    counts = Counter(b.contact for b in result.blocked)
+    top = max(counts.values())
+    worst = next(b.contact for b in reversed(result.blocked) if counts[b.contact] == top)
+    assert f"blocked by {worst} (" in result.reason
+    assert "particles into it" in result.reason

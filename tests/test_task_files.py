@@ -1,6 +1,7 @@
 """Task files: built-ins load; every kind of bad file is one clear line and exit code 2."""
 
 import copy
+import json
 import re
 import subprocess
 import sys
@@ -14,6 +15,7 @@ from click.testing import CliRunner
 from bilba_dist.cli.main import cli, register
 from bilba_dist.errors import TaskError
 from bilba_dist.task.loader import builtin_tasks, load_task
+from bilba_dist.task.schema import PAPER_PLANNER
 from tests.conftest import write_task
 
 
@@ -56,7 +58,7 @@ def _drop(data, *path):
 def _set(data, value, *path):
     node = data
     for key in path[:-1]:
-        node = node[key]
+        node = node[key] if isinstance(node, list) else node.setdefault(key, {})
     node[path[-1]] = value
 
 
@@ -263,3 +265,41 @@ def test_the_readme_task_example_loads_with_hex_pegs_environment(tmp_path):
     assert task.goal == reference.goal
     assert task.spec.uncertainty == reference.spec.uncertainty
     assert np.allclose(task.manipuland.pieces[0].vertices, reference.manipuland.pieces[0].vertices)
+
+
+@pytest.mark.parametrize(
+    ("planner", "expected"),
+    [
+        ({}, {"sample_patience": 16, "race_contacts": 3, "prune_rounds": 0, "n_attempts": 0}),
+        ({"preset": "paper"}, PAPER_PLANNER),
+        ({"preset": "paper", "race_contacts": 2}, {**PAPER_PLANNER, "race_contacts": 2}),
+    ],
+    ids=["defaults", "paper", "paper with a key of its own"],
+)
+def test_planner_presets_in_a_task_file(tmp_path, peg_yaml, planner, expected):
+    peg_yaml["planner"] = planner
+    task = load_task(str(write_task(tmp_path, peg_yaml)))
+    assert {k: getattr(task.spec.planner, k) for k in expected} == expected
+
+
+def test_plan_preset_option_replaces_the_files_settings(tmp_path, peg_yaml):
+    """--preset paper gives the authors' values even over a task file's own (recorded in the
+    plan file's parameters); an unknown preset is one line and exit 2."""
+    peg_yaml["planner"] = {"race_contacts": 5, "gp_rounds": 2}
+    path = write_task(tmp_path, peg_yaml)
+    out = tmp_path / "plan.json"
+    register()
+    args = ["plan", str(path), "--workers", "0", "--no-log", "--timeout", "0", "--out", str(out)]
+    CliRunner().invoke(cli, [*args, "--preset", "paper"])
+    parameters = json.loads(out.read_text())["parameters"]
+    assert parameters["race_contacts"] == 0 and parameters["preset"] == "paper"
+    assert parameters["gp_rounds"] == 2  # not a preset field: the file's value stays
+    bad = CliRunner().invoke(cli, [*args, "--preset", "fast"])
+    assert bad.exit_code == 2 and "'fast' is not one of" in bad.output
+
+
+def test_unknown_preset_in_a_task_file_is_one_line(tmp_path, peg_yaml):
+    peg_yaml["planner"] = {"preset": "quick"}
+    result = CliRunner().invoke(cli, ["graph", str(write_task(tmp_path, peg_yaml))])
+    assert result.exit_code == 2
+    assert re.search(r":\d+: planner\.preset: Input should be 'default' or 'paper'", result.output)

@@ -22,7 +22,8 @@ from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.rollout import DynamicsModel
-from bilba_dist.task.loader import Task, load_task
+from bilba_dist.task.loader import Task, load_task, with_preset
+from bilba_dist.task.schema import PRESETS
 
 EXIT_NO_PLAN = 1
 
@@ -32,6 +33,12 @@ EXIT_NO_PLAN = 1
 @click.option("--planner", type=click.Choice(PLANNERS), default="bilba-variable", show_default=True)
 @uncertainty_option
 @click.option("--seed", type=SEED, default=0, show_default=True)
+@click.option(
+    "--preset",
+    type=click.Choice(sorted(PRESETS)),
+    help="Planner settings: paper = the authors' (to reproduce the paper), default = ours; "
+    "replaces the task file's values for those settings.",
+)
 @click.option(
     "--out",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -67,6 +74,7 @@ def plan_command(
     planner: str,
     uncertainty: tuple[str, ...],
     seed: int,
+    preset: str | None,
     out: Path | None,
     timeout: float | None,
     workers: int,
@@ -83,6 +91,8 @@ def plan_command(
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
     loaded = load_task(task, split_uncertainty(uncertainty))
+    if preset is not None:
+        loaded = with_preset(loaded, preset)
     if not allow_start_contact:
         check_start_free(loaded, initial_belief(loaded))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"

@@ -2,6 +2,7 @@
 each contact with MakeContact, replan after each contact reached, prune an edge that failed,
 and start over from the initial belief, up to ``n_attempts`` or the timeout."""
 
+import itertools
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -17,6 +18,7 @@ from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.modes.graph import ModeGraph
 from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.planning.best import plan_best
+from bilba_dist.planning.diagnosis import blocked, explain
 from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.gp import GPParams
 from bilba_dist.planning.make_contact import (
@@ -96,6 +98,8 @@ def plan(
         )
     except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
+    if not result.success and result.blocked:
+        result.reason += f"; {explain(result.blocked)}"
     if result.success and validate_on is not None:
         _validate(task, result, b0, validate_on)
     result.planning_time_s = clock() - started
@@ -165,10 +169,12 @@ def _attempts(
     panda: PandaModel,
 ) -> None:
     params = task.spec.planner
-    for attempt in range(params.n_attempts):
+    attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
+    for attempt in attempts:
         result.attempts = attempt + 1
         belief, mode, steps = b0, FREE, []
-        if result.rounds < params.prune_rounds and not graph.has_schedule():
+        more_rounds = params.prune_rounds == 0 or result.rounds < params.prune_rounds
+        if more_rounds and not graph.has_schedule():
             graph.restore()
             result.rounds += 1
         graph.reweight(_positions(belief))
@@ -176,6 +182,7 @@ def _attempts(
             schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)
             target = schedule[1]
             if not outcome.success:
+                result.blocked.append(blocked(search.cache, belief, target, outcome.reached))
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))
                 search.recorder.pruned((mode, target), outcome.reason)

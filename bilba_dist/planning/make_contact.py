@@ -58,6 +58,7 @@ class ContactOutcome:
     steps: list[Step]
     belief: Belief
     reason: str = ""
+    reached: int = 0  # on failure: particles in the contact (or past it) when it gave up
 
 
 def make_contact(
@@ -75,13 +76,17 @@ def make_contact(
         best = best_motion(search, belief, mode, accept, rng)
         if best is None or best.posterior is None or best.count <= before:
             reason = f"no motion brought more particles into {mode} ({before}/{len(belief)})"
-            return ContactOutcome(False, steps, belief, reason)
+            return ContactOutcome(False, steps, belief, reason, before)
         steps.append(_accept(search, mode, belief, best))
         belief = best.posterior
         if best.count == len(belief):
             return ContactOutcome(True, steps, belief)
     return ContactOutcome(
-        False, steps, belief, f"{search.max_motions} motions did not reach {mode}"
+        False,
+        steps,
+        belief,
+        f"{search.max_motions} motions did not reach {mode}",
+        belief.count(accept),
     )
 
 

@@ -8,6 +8,7 @@ import pinocchio as pin
 
 from bilba_dist.belief.state import Belief
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.planning.diagnosis import Blocked
 
 
 @dataclass(frozen=True)
@@ -38,6 +39,8 @@ class PlanResult:
     schedules: list[list[ContactPair]] = field(default_factory=list)
     pruned: list[tuple[ContactPair, ContactPair]] = field(default_factory=list)
     final_belief: Belief | None = None
+    #: Each failed attempt at a contact, for the reason given when no plan is found.
+    blocked: list[Blocked] = field(default_factory=list)
 
     def outcome(self) -> dict[str, Any]:
         """Success, why not, time and rollouts: the log's /outcome and a batch record."""

@@ -18,6 +18,8 @@ from bilba_dist.geometry.mesh import mesh_vertices
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
+    PAPER_PLANNER,
+    PRESETS,
     ConvexSpec,
     PartSpec,
     PlannerParams,
@@ -150,6 +152,15 @@ def with_planner(task: Task, **changes: Any) -> Task:
         error = exc.errors()[0]
         raise TaskError(f"planner.{_dotted(error['loc'])}: {error['msg']}") from None
     return build_task(task.spec.model_copy(update={"planner": planner}), task.source)
+
+
+def with_preset(task: Task, preset: str) -> Task:
+    """``task`` with a planner preset's fields (``paper``: the authors' settings; ``default``:
+    ours) replacing the task file's values for those fields."""
+    values = PRESETS[preset] if preset != "default" else {
+        name: PlannerParams.model_fields[name].default for name in PAPER_PLANNER
+    }  # fmt: skip
+    return with_planner(task, preset=preset, **values)
 
 
 def start_gripper_pose(spec: TaskSpec) -> pin.SE3:

@@ -1,0 +1,77 @@
+"""Why no plan was found, in terms a user can act on: which contact blocked the search, and
+why it could not be made — no region at the particles' rotations, the best single motion
+bringing only k of n particles in, the belief spread wider than the contact's region."""
+
+from collections import Counter
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.distance import pdist
+
+from bilba_dist.belief.state import Belief
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.modes.schedule import SliceCache
+
+
+@dataclass(frozen=True)
+class Blocked:
+    """One failed attempt to make ``contact`` from a belief of ``n`` particles."""
+
+    contact: ContactPair
+    reached: int  # particles in the contact (or past it) after the best motions
+    n: int
+    no_region: int  # particles at whose rotation (and start rotation) the contact has no region
+    spread_m: float  # largest distance between two particles' part positions (env frame)
+    region_m: float  # the contact region's largest extent (first particle that has one)
+
+
+def _diameter(points: np.ndarray) -> float:
+    return float(pdist(points).max()) if len(points) > 1 else 0.0
+
+
+def blocked(cache: SliceCache, belief: Belief, contact: ContactPair, reached: int) -> Blocked:
+    """What stood in the way of ``contact`` from ``belief`` (no random draws: the planner's
+    generator is untouched)."""
+    positions, no_region = [], 0
+    region_m = 0.0
+    for particle, state in zip(belief.particles, belief.states, strict=True):
+        X_OM = particle.X_WO.inverse() * state.X_WM
+        positions.append(X_OM.translation)
+        triangles = cache.get(X_OM.rotation).mode_triangles(contact)[0]
+        if not len(triangles):  # as the sampler does: try the start rotation
+            start = (particle.X_WO.inverse() * cache.task.X_WG0 * particle.X_GM).rotation
+            triangles = cache.get(start).mode_triangles(contact)[0]
+        if not len(triangles):
+            no_region += 1
+        elif region_m == 0.0:
+            region_m = _diameter(np.unique(triangles.reshape(-1, 3), axis=0))
+    return Blocked(
+        contact, reached, len(belief), no_region, _diameter(np.array(positions)), region_m
+    )
+
+
+def explain(failures: list[Blocked]) -> str:
+    """One sentence on the contact that blocked most attempts (ties: the latest)."""
+    if not failures:
+        return ""
+    counts = Counter(f.contact for f in failures)
+    worst = max(counts.values())
+    last = next(f for f in reversed(failures) if counts[f.contact] == worst)
+    same = [f for f in failures if f.contact == last.contact]
+    text = f"blocked by {last.contact} ({worst} of {len(failures)} failed attempts): "
+    if last.no_region == last.n:
+        return text + (
+            "it has no region at the particles' rotations, so the parts cannot touch that way "
+            "there (a goal face that meets the other part only when tilted?)"
+        )
+    best = max(f.reached for f in same)
+    text += f"no motion brought more than {best} of {last.n} particles into it"
+    if last.no_region:
+        text += f"; it has no region at the rotations of {last.no_region} of {last.n} particles"
+    if last.spread_m > last.region_m > 0:
+        text += (
+            f"; the particles spread {last.spread_m * 1000:.1f} mm across, wider than its "
+            f"region ({last.region_m * 1000:.1f} mm): less uncertainty, or a contact before "
+            "it that funnels them (a chamfer), would help"
+        )
+    return text
