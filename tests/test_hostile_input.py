@@ -39,7 +39,7 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
     "infinite friction": (edited("friction: 0.45", "friction: .inf"), "friction"),
     "friction 50": (edited("friction: 0.45", "friction: 50"), "friction"),
     "time step 1e6": (
-        edited("planner:                # the", "planner:\n  sim_timestep_s: 1e6\n  #"),
+        edited("# No planner section", "planner:\n  sim_timestep_s: 1e6\n# No planner section"),
         "sim_timestep_s",
     ),
     "duplicate friction": (

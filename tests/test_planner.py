@@ -24,6 +24,14 @@ from bilba_dist.task.loader import load_task
 from bilba_dist.workers.rollout_worker import RolloutWorker
 
 A, B, C = (ContactPair(f"e/{k}", "m/-z") for k in "abc")
+#: A MakeContact too cheap to reach any contact: one setpoint per particle, no GP, 10 ms
+#: motions. Every edge it tries fails and is pruned.
+CHEAP = {
+    "setpoints_per_particle": 1,
+    "noisy_setpoints": 0,
+    "gp_rounds": 0,
+    "motion_timeout_s": 0.01,
+}
 
 
 def belief_with(contacts):
@@ -190,13 +198,7 @@ def test_running_out_of_attempts_says_so():
     from bilba_dist.task.loader import build_task
 
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
-    cheap = {
-        "n_attempts": 2,
-        "setpoints_per_particle": 1,
-        "noisy_setpoints": 0,
-        "gp_rounds": 0,
-        "motion_timeout_s": 0.01,
-    }
+    cheap = {**CHEAP, "n_attempts": 2}
     spec = task.spec.model_copy(update={"planner": task.spec.planner.model_copy(update=cheap)})
     worker = RolloutWorker(spec, "panda")
     result = plan(build_task(spec, "x"), worker, "bilba-fixed", seed=0)
@@ -215,14 +217,7 @@ def test_pruning_rounds_put_pruned_edges_back():
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     results = []
     for rounds in (1, 2):
-        cheap = {
-            "n_free": 1,
-            "prune_rounds": rounds,
-            "setpoints_per_particle": 1,
-            "noisy_setpoints": 0,
-            "gp_rounds": 0,
-            "motion_timeout_s": 0.01,
-        }
+        cheap = {**CHEAP, "n_free": 1, "prune_rounds": rounds}
         planner = task.spec.planner.model_copy(update=cheap)
         spec = task.spec.model_copy(update={"planner": planner})
         worker = RolloutWorker(spec, "panda")
@@ -393,14 +388,7 @@ def test_a_search_out_of_schedules_goes_on_until_its_timeout():
     from bilba_dist.task.loader import build_task, with_preset
 
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
-    cheap = {
-        "n_free": 1,
-        "setpoints_per_particle": 1,
-        "noisy_setpoints": 0,
-        "gp_rounds": 0,
-        "race_contacts": 0,
-        "motion_timeout_s": 0.01,
-    }
+    cheap = {**CHEAP, "n_free": 1, "race_contacts": 0}
     results = {}
     for preset in ("default", "paper"):
         preset_task = with_preset(task, preset)
