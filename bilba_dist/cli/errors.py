@@ -29,6 +29,9 @@ def user_errors(command: F) -> F:
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         try:
             return command(*args, **kwargs)
+        except BrokenPipeError:  # stdout closed early (`bilba logs summary … | head`)
+            sys.stderr.close()
+            os._exit(0)
         except BilbaError as exc:
             click.echo(f"bilba: error: {exc}", err=True)
             sys.exit(EXIT_BAD_INPUT)

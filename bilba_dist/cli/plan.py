@@ -12,11 +12,13 @@ from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import (
     SEED,
     TIMEOUT_S,
+    Bounded,
     split_uncertainty,
     task_argument,
     uncertainty_option,
     workers_option,
 )
+from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan
@@ -64,6 +66,14 @@ EXIT_NO_PLAN = 1
 )
 @click.option("--no-log", is_flag=True, help="Write no log.")
 @click.option(
+    "--portfolio",
+    type=Bounded(1, 1024, int),
+    default=1,
+    show_default=True,
+    help="Run N searches (seeds SEED..SEED+N-1) side by side on Ray, one CPU each; the first "
+    "plan found wins and the others are cancelled.",
+)
+@click.option(
     "--allow-start-contact",
     is_flag=True,
     help="Plan even if a particle's part starts inside the environment (refused by default).",
@@ -82,6 +92,7 @@ def plan_command(
     address: str | None,
     log_path: Path | None,
     no_log: bool,
+    portfolio: int,
     allow_start_contact: bool,
 ) -> None:
     """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
@@ -98,6 +109,12 @@ def plan_command(
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
+    if portfolio > 1:
+        if workers == 0:
+            raise BilbaError("--portfolio runs its searches on Ray: give --workers 1 or more")
+        plan_portfolio(loaded, planner, seed, portfolio, timeout, workers, address, model,
+                       out, None if no_log else log_path)  # fmt: skip
+        return
     log = None if no_log else LogWriter(log_path, loaded, planner, seed, model == "panda")
     with (
         rollout_backend(loaded, workers, address, model) as backend,
@@ -128,6 +145,58 @@ def plan_command(
     if log is not None:
         click.echo(f"log        {log.path} ({log.transitions} transitions)")
     if not result.success:
+        sys.exit(EXIT_NO_PLAN)
+
+
+def plan_portfolio(
+    task: Task,
+    planner: str,
+    seed: int,
+    n: int,
+    timeout: float | None,
+    workers: int,
+    address: str | None,
+    model: DynamicsModel,
+    out: Path,
+    log_path: Path | None,
+) -> None:
+    """``n`` seeded searches on Ray; write the first plan found (and its log)."""
+    from bilba_dist.schedulers.portfolio import run_portfolio
+    from bilba_dist.schedulers.session import ray_session
+
+    seeds = list(range(seed, seed + n))
+    click.echo(
+        f"portfolio  {n} searches, seeds {seeds[0]}..{seeds[-1]}, on "
+        f"{'the cluster at ' + address if address else f'a local Ray instance of {workers} CPUs'}"
+    )
+    started = time.perf_counter()
+    with ray_session(workers, address):
+        found = run_portfolio(task, planner, seeds, timeout, model)
+    wall = time.perf_counter() - started
+    output = found.output
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(output["plan_text"], encoding="utf-8")
+    if log_path is not None:
+        log_path.parent.mkdir(parents=True, exist_ok=True)
+        log_path.write_bytes(output["log_bytes"])
+    ended = ", ".join(f"seed {s} {status}" for s, status in found.finished.items())
+    if found.winner is None:
+        click.echo(f"outcome    NO PLAN from any search ({ended}); last: {output['reason']}")
+    else:
+        click.echo(
+            f"outcome    plan found by seed {found.winner} in {output['planning_time_s']:.1f} s "
+            f"({wall:.1f} s with Ray), {output['rollouts']} rollouts"
+            + (f"; before it: {ended}" if ended else "")
+            + (
+                f"; cancelled: seeds {', '.join(map(str, found.cancelled))}"
+                if found.cancelled
+                else ""
+            )
+        )
+    click.echo(f"plan file  {out}")
+    if log_path is not None:
+        click.echo(f"log        {log_path} (the winning search's)")
+    if found.winner is None:
         sys.exit(EXIT_NO_PLAN)
 
 
