@@ -292,3 +292,20 @@ def test_logs_export_ndjson_holds_every_message_and_csv_every_particle(planned, 
     last = rows[-1]
     assert float(last["z_after"]) == transitions[-1]["after"][2]["X_WM"]["xyz"][2]
     assert "floor/+z|peg/-z" in last["contacts_after"].split(";")
+
+
+def test_output_cut_short_by_a_closed_pipe_ends_quietly(planned):
+    """`bilba logs export … | head -c 100`: the reader goes away; no traceback, no
+    'internal error', exit 0."""
+    _, log = planned
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from bilba_dist.cli.main import main; main()",
+         "logs", "export", str(log), "--format", "ndjson"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )  # fmt: skip
+    assert proc.stdout is not None and proc.stderr is not None
+    assert len(proc.stdout.read(100)) == 100
+    proc.stdout.close()
+    assert proc.wait(timeout=60) == 0
+    assert proc.stderr.read() == b""
