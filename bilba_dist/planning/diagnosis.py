@@ -11,6 +11,7 @@ from scipy.spatial.distance import pdist
 from bilba_dist.belief.state import Belief
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
+from bilba_dist.planning.setpoints import start_rotation
 
 
 @dataclass(frozen=True)
@@ -34,12 +35,12 @@ def blocked(cache: SliceCache, belief: Belief, contact: ContactPair, reached: in
     generator is untouched)."""
     positions, no_region = [], 0
     region_m = 0.0
-    for particle, state in zip(belief.particles, belief.states, strict=True):
-        X_OM = particle.X_WO.inverse() * state.X_WM
+    for i, particle in enumerate(belief.particles):
+        X_OM = belief.X_OM(i)
         positions.append(X_OM.translation)
         triangles = cache.get(X_OM.rotation).mode_triangles(contact)[0]
         if not len(triangles):  # as the sampler does: try the start rotation
-            start = (particle.X_WO.inverse() * cache.task.X_WG0 * particle.X_GM).rotation
+            start = start_rotation(particle, cache.task.X_WG0)
             triangles = cache.get(start).mode_triangles(contact)[0]
         if not len(triangles):
             no_region += 1

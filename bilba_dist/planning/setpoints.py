@@ -23,6 +23,12 @@ class SetpointParams:
     patience: int = 0  # stop scoring samples after this many in a row without a better score
 
 
+def start_rotation(particle: Particle, X_WG0: pin.SE3) -> np.ndarray:
+    """``R_OM`` of the particle's part at the start (gripper at ``X_WG0``): the slice the
+    setpoints fall back to where the current rotation holds no point of a mode."""
+    return (particle.X_WO.inverse() * X_WG0 * particle.X_GM).rotation
+
+
 def sample_setpoints(
     particle: Particle,
     X_WM: pin.SE3,
@@ -46,7 +52,7 @@ def sample_setpoints(
     cslice = cache.get(rotation)
     points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
     if len(points) == 0:
-        rotation = (particle.X_WO.inverse() * cache.task.X_WG0 * particle.X_GM).rotation
+        rotation = start_rotation(particle, cache.task.X_WG0)
         cslice = cache.get(rotation)
         points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
     if len(points) == 0:

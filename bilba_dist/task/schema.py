@@ -196,6 +196,8 @@ class PlannerParams(Strict):
     # the puzzle's 0.5 mm side clearances, also took the generated family from 60 to 62 of
     # 63 plans (benchmarks/README.md, Tasks nobody tuned; docs/design.md).
     near_edge_m: float = Field(default=0.0006, ge=0, le=0.05)
+    # Schedule attempts (each ends with a pruned edge or a plan); 0, the default, is no limit
+    # but the timeout (ours; the authors stop after 50).
     n_attempts: int = Field(default=0, ge=0, le=100_000)
     # When pruning has left no schedule from free, put the pruned edges back and go on, up
     # to this many rounds in all; 0, the default, until the timeout (ours; the authors stop
