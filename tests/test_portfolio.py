@@ -41,3 +41,25 @@ def test_portfolio_needs_ray_workers(tmp_path):
     result = run("plan", "peg-in-hole", "--portfolio", "2", "--workers", "0", "--no-log")
     assert result.exit_code == 2
     assert "--portfolio runs its searches on Ray" in result.output
+
+
+def test_portfolio_plan_file_that_cannot_be_written_is_one_line(tmp_path):
+    """--out lies under a file: the searches run, then writing fails in one line, exit 2."""
+    (tmp_path / "file").write_text("")
+    out = tmp_path / "file" / "plan.json"
+    result = run(
+        "plan", "peg-in-hole", "-u", "grasp.pitch=1deg", "--portfolio", "2", "--workers", "2",
+        "--no-log", "--out", str(out),
+    )  # fmt: skip
+    assert result.exit_code == 2, result.output
+    assert f"{out}: cannot write plan file" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_log_that_cannot_be_written_is_one_line_before_planning(tmp_path):
+    (tmp_path / "file").write_text("")
+    log = tmp_path / "file" / "log.mcap"
+    result = run("plan", "peg-in-hole", "--workers", "0", "--log", str(log))
+    assert result.exit_code == 2
+    assert f"{log}: cannot write log" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and result.stdout == ""

@@ -21,7 +21,7 @@ from bilba_dist.cli.options import (
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
-from bilba_dist.plans.file import dumps, plan_document, write_plan
+from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task, with_preset
@@ -174,11 +174,13 @@ def plan_portfolio(
         found = run_portfolio(task, planner, seeds, timeout, model)
     wall = time.perf_counter() - started
     output = found.output
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(output["plan_text"], encoding="utf-8")
+    write_plan_text(output["plan_text"], out)
     if log_path is not None:
-        log_path.parent.mkdir(parents=True, exist_ok=True)
-        log_path.write_bytes(output["log_bytes"])
+        try:
+            log_path.parent.mkdir(parents=True, exist_ok=True)
+            log_path.write_bytes(output["log_bytes"])
+        except OSError as exc:
+            raise BilbaError(f"{log_path}: cannot write log: {exc.strerror or exc}") from None
     ended = ", ".join(f"seed {s} {status}" for s, status in found.finished.items())
     if found.winner is None:
         click.echo(f"outcome    NO PLAN from any search ({ended}); last: {output['reason']}")

@@ -68,9 +68,14 @@ def dumps(document: dict[str, Any]) -> str:
 
 
 def write_plan(document: dict[str, Any], path: Path) -> None:
+    write_plan_text(dumps(document), path)
+
+
+def write_plan_text(text: str, path: Path) -> None:
+    """A plan file's text (``dumps`` of its document, e.g. from a Ray task) at ``path``."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(dumps(document), encoding="utf-8")
+        path.write_text(text, encoding="utf-8")
     except OSError as exc:
         raise BilbaError(f"{path}: cannot write plan file: {exc.strerror or exc}") from None
 
