@@ -35,6 +35,13 @@ def is_symmetric_psd(K_bytes: bytes) -> bool:
     return bool(np.allclose(K, K.T, atol=1e-9) and np.linalg.eigvalsh(K).min() >= -1e-9)
 
 
+def damping(K: np.ndarray) -> np.ndarray:
+    """``D = 2·sqrtm(K)``: the symmetric square root of the stiffness, doubled — the damping
+    the simulated controller pairs with ``K`` (and plan files record)."""
+    w, V = np.linalg.eigh(np.asarray(K, dtype=float))
+    return 2.0 * (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
+
+
 @dataclass(frozen=True)
 class Motion:
     """A compliant motion ``u = (K, G_d)`` run for ``timeout_s``: ``K`` is the 6×6 Cartesian

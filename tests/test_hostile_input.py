@@ -157,6 +157,7 @@ def plan_text(tmp_path_factory) -> str:
 def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
     doc = json.loads(text)
     K = doc["motions"][0]["K"]
+    spec, robot = doc["task"]["spec"], doc["robot"]
     return {
         "NaN in K": (text.replace(json.dumps(K[0][0]), "NaN", 1), "NaN"),
         "Infinity": (text.replace('"timeout_s": 5.0', '"timeout_s": Infinity', 1), "Infinity"),
@@ -173,7 +174,23 @@ def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
             ),
             "malformed",
         ),
-        "future version": (text.replace('"version": 1', '"version": 99', 1), "version 99"),
+        "future version": (text.replace('"version": 2', '"version": 99', 1), "version 99"),
+        "D not 2 sqrtm(K)": (
+            json.dumps({**doc, "motions": [{**doc["motions"][0], "D": K}]}),
+            "motions/0/D is not 2·sqrtm(K)",
+        ),
+        "task edited": (
+            json.dumps({**doc, "task": {**doc["task"], "spec": {**spec, "friction": 0.9}}}),
+            "does not match its hash",
+        ),
+        "no start joints": (
+            json.dumps({**doc, "robot": {k: v for k, v in robot.items() if k != "start_joints"}}),
+            "'start_joints' is a required property",
+        ),
+        "task spec invalid": (
+            json.dumps({**doc, "task": {**doc["task"], "spec": {**spec, "friction": -1}}}),
+            "task.spec.friction",
+        ),
         "huge file": (text + " " * (17 * 2**20), "byte limit"),
     }
 

@@ -57,6 +57,7 @@ def test_the_wheel_installs_nothing_named_workers_or_schedulers(tmp_path):
         "bilba_dist/schedulers/batch.py",
         "bilba_dist/task/tasks/hex-peg.stl",
         "bilba_dist/task/tasks/peg-in-hole.yaml",
+        "bilba_dist/plans/plan-v2.schema.json",
     ):
         assert expected in names
 

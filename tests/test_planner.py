@@ -151,7 +151,7 @@ def test_plan_file_keeps_the_simulated_rotation_exactly(tmp_path):
 @pytest.mark.parametrize(
     ("rotation", "message"),
     [
-        ([[1, 0, 0], [0, 1, 0]], "must be a 3x3 rotation matrix"),
+        ([[1, 0, 0], [0, 1, 0]], "at motions/0/G_d/rotation: [[1, 0, 0], [0, 1, 0]] is too short"),
         ([[2, 0, 0], [0, 1, 0], [0, 0, 1]], "must be a 3x3 rotation matrix"),
         ([[1, 0, 0], [0, -1, 0], [0, 0, -1]], "rotation and quat_xyzw disagree"),
     ],

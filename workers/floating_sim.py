@@ -63,7 +63,7 @@ class FloatingSim:
 
     def __init__(self, task: Task, settings: SimSettings) -> None:
         self.task, self.settings = task, settings
-        self.client = connect(settings.timestep_s, 0.0)
+        self.client = connect(settings.timestep_s, 0.0, settings.gui)
         compound = part_compound(task.manipuland, self.client)
         self.body = p.createMultiBody(
             settings.virtual_mass_kg, compound, -1, physicsClientId=self.client

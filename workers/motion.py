@@ -1,5 +1,5 @@
-"""Pieces both dynamics models share: time accounting, damping from stiffness, the setpoint
-ramp's length, and labelling the final contacts."""
+"""Pieces both dynamics models share: time accounting, damping from stiffness (defined in
+`bilba_dist.rollout`), the setpoint ramp's length, and labelling the final contacts."""
 
 import math
 from dataclasses import dataclass
@@ -10,6 +10,7 @@ import pinocchio as pin
 from bilba_dist.geometry.contact import ContactSet
 from bilba_dist.geometry.labels import label_points
 from bilba_dist.geometry.piece import Part
+from bilba_dist.rollout import damping as damping
 from bilba_dist.workers.scene import EnvironmentBodies
 from bilba_dist.workers.settings import SimSettings
 
@@ -24,12 +25,6 @@ class SimStats:
     def add(self, steps: int, physics_s: float) -> None:
         self.steps += steps
         self.physics_s += physics_s
-
-
-def damping(K: np.ndarray) -> np.ndarray:
-    """``B = 2√K``: the symmetric square root of the stiffness, doubled."""
-    w, V = np.linalg.eigh(K)
-    return 2.0 * (V * np.sqrt(np.clip(w, 0.0, None))) @ V.T
 
 
 def ramp_steps(X_start: pin.SE3, X_goal: pin.SE3, settings: SimSettings) -> int:

@@ -27,9 +27,9 @@ from bilba_dist.workers.motion import (
     ramp_poses,
     ramp_steps,
 )
-from bilba_dist.workers.scene import EnvironmentBodies, connect
+from bilba_dist.workers.scene import EnvironmentBodies, connect, paced
 from bilba_dist.workers.settings import SimSettings
-from bilba_dist.workers.urdf import PART_LINK, panda_with_part, part_centre
+from bilba_dist.workers.urdf import PART_LINK, panda_with_part
 
 
 @dataclass(frozen=True)
@@ -66,7 +66,7 @@ class PandaSim:
 
     def __init__(self, task: Task, X_GM: pin.SE3, settings: SimSettings) -> None:
         self.task, self.X_GM, self.settings = task, X_GM, settings
-        self.client = connect(settings.timestep_s, -9.81)
+        self.client = connect(settings.timestep_s, -9.81, settings.gui)
         mass = task.spec.manipuland.mass
         urdf = panda_with_part(task.manipuland, X_GM, mass)
         self.robot = p.loadURDF(
@@ -93,7 +93,7 @@ class PandaSim:
             physicsClientId=self.client,
         )
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
-        self.model = PandaModel(mass, X_GM, part_centre(task.manipuland))
+        self.model = PandaModel(mass, X_GM, task.manipuland.centre())
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
 
@@ -148,6 +148,8 @@ class PandaSim:
         model, data, gravity = self.model.model, self.model.data, pin.computeGeneralizedGravity
         read, command = p.getJointStates, p.setJointMotorControlArray
         torque_control, step, timer = p.TORQUE_CONTROL, p.stepSimulation, time.perf_counter
+        if s.gui:
+            step = paced(step, s.timestep_s)
         G, Jt = gains.state_gains, gains.Jt
         limit, last, tau_max = gains.limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop

@@ -20,7 +20,7 @@ from bilba_dist.task.loader import Task, build_task
 from bilba_dist.task.schema import TaskSpec
 from bilba_dist.workers.floating_sim import FloatingSim
 from bilba_dist.workers.panda_sim import PandaSim
-from bilba_dist.workers.settings import SimSettings
+from bilba_dist.workers.settings import SimSettings, driver_settings
 
 
 def grasp_key(X_GM: pin.SE3) -> bytes:
@@ -44,14 +44,19 @@ class RolloutWorker:
         self.settings = self._task_settings()
 
     def _task_settings(self) -> SimSettings:
-        """The worker's own settings with the task's step, contact distance and ramp."""
+        """The worker's own settings with the task's step, contact distance and ramp; a task
+        planned for a driver runs as that driver would (`bilba_dist.robot.drivers`): the
+        setpoint ramped along the hand's line, and no wrench clip where it has none."""
         planner = self.task.spec.planner
-        return replace(
+        settings = replace(
             self._own,
             timestep_s=planner.sim_timestep_s,
             contact_distance_m=planner.contact_distance_m,
             cartesian_ramp=self._own.cartesian_ramp or planner.cartesian_ramp,
         )
+        if planner.driver != "none":
+            settings = driver_settings(settings, planner.driver)
+        return settings
 
     @staticmethod
     def _as_task(task: Task | TaskSpec) -> Task:

@@ -6,24 +6,49 @@ on a body's base only): a 5 mm clearance then really is 5 mm. Friction: the envi
 carries the task's μ and everything else 1, since PyBullet multiplies the two.
 """
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 import pinocchio as pin
 import pybullet as p
 
+from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.piece import ConvexPiece, Part
 
 FAR = pin.SE3(np.eye(3), np.array([100.0, 100.0, 100.0]))  # out of every AABB of a world
 
 
-def connect(timestep_s: float, gravity: float) -> int:
-    """A new DIRECT client with the given step; always pass its id on."""
-    client = p.connect(p.DIRECT)
+_viewer: list[int] = []  # the process's one GUI client, once opened
+
+
+def connect(timestep_s: float, gravity: float, gui: bool = False) -> int:
+    """A new DIRECT client with the given step (with ``gui``, the viewer, if this process has
+    none open yet: PyBullet allows one); always pass its id on."""
+    gui = gui and not _viewer
+    client = p.connect(p.GUI if gui else p.DIRECT)
+    if client < 0:
+        raise BilbaError("cannot open the PyBullet viewer (no display?)")
+    if gui:
+        _viewer.append(client)
     p.setTimeStep(timestep_s, physicsClientId=client)
     p.setGravity(0, 0, gravity, physicsClientId=client)
     p.setPhysicsEngineParameter(deterministicOverlappingPairs=1, physicsClientId=client)
     return client
+
+
+def paced(step: Callable[[int], object], timestep_s: float) -> Callable[[int], None]:
+    """``step`` slowed to real time (for the viewer: unpaced, a 5 s motion flashes by in a
+    tenth of a second)."""
+    clock = [time.perf_counter()]
+
+    def step_in_real_time(client: int) -> None:
+        step(client)
+        clock[0] += timestep_s
+        time.sleep(max(0.0, clock[0] - time.perf_counter()))
+
+    return step_in_real_time
 
 
 def quat_xyzw(R: np.ndarray) -> list[float]:

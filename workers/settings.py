@@ -1,7 +1,7 @@
 """Numbers of the simulated controllers, with their units. Defaults follow
 docs/reference-values.md and the measurements in docs/physics.md."""
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 
 @dataclass(frozen=True)
@@ -24,3 +24,15 @@ class SimSettings:
     virtual_mass_kg: float = 8.0  # floating model: the Panda hand's effective inertia
     # (task-space Λ at the peg start: 6–10 kg, 0.6–1.2 kg·m²); too little is unstable
     virtual_inertia_kg_m2: float = 0.8
+    gui: bool = False  # open the PyBullet viewer (`bilba execute --gui`; one world per process)
+
+
+def driver_settings(settings: SimSettings, driver: str) -> SimSettings:
+    """``settings`` as a Franka driver runs a motion: every exported script ramps the EE
+    setpoint along a straight line, and only franky can bound the spring's wrench."""
+    from bilba_dist.robot.drivers import DRIVERS
+
+    settings = replace(settings, cartesian_ramp=True)
+    if not DRIVERS[driver].wrench_clip:
+        settings = replace(settings, spring_limit=float("inf"))
+    return settings

@@ -86,7 +86,7 @@ def panda_with_part(part: Part, X_GM: pin.SE3, mass: float, folder: Path | None 
     text = re.sub(r'filename="(package://)?meshes/', f'filename="{source.parent}/meshes/', text)
     for joint in FINGER_JOINTS:
         text = re.sub(rf'(<joint name="{joint}" type=)"prismatic"', r'\1"fixed"', text)
-    centre = part_centre(part)
+    centre = part.centre()
     link = f"""
   <link name="{PART_LINK}">
     <inertial><origin xyz="{" ".join(f"{v:.17g}" for v in centre)}"/><mass value="{mass}"/>
@@ -101,9 +101,3 @@ def panda_with_part(part: Part, X_GM: pin.SE3, mass: float, folder: Path | None 
     path = folder / "panda_with_part.urdf"
     path.write_text(text)
     return path
-
-
-def part_centre(part: Part) -> np.ndarray:
-    """Centre of the part's vertices [m, part frame]: where its mass is put."""
-    points = np.concatenate([p.vertices for p in part.pieces])
-    return (points.min(axis=0) + points.max(axis=0)) / 2

@@ -18,13 +18,15 @@ def main() -> None:
 
 def register() -> None:
     """Attach the sub-commands (imported here so `bilba --help` stays quick)."""
-    from bilba_dist.cli import batch, graph, logs, plan, tasks, validate
+    from bilba_dist.cli import batch, graph, logs, plan, robot, tasks, validate
 
     for command in (
         tasks.tasks,
         graph.graph,
         plan.plan_command,
         validate.validate,
+        robot.execute,
+        robot.export,
         logs.logs,
         batch.batch,
         batch.report,

@@ -23,8 +23,9 @@ from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
+from bilba_dist.robot.drivers import DRIVER_NAMES
 from bilba_dist.rollout import DynamicsModel
-from bilba_dist.task.loader import Task, load_task, with_preset
+from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
 from bilba_dist.task.schema import PRESETS
 
 EXIT_NO_PLAN = 1
@@ -40,6 +41,12 @@ EXIT_NO_PLAN = 1
     type=click.Choice(sorted(PRESETS)),
     help="Planner settings: paper = the authors' (to reproduce the paper), default = ours; "
     "replaces the task file's values for those settings.",
+)
+@click.option(
+    "--driver",
+    type=click.Choice(DRIVER_NAMES),
+    help="Plan within this Franka driver's form of stiffness and its limits (docs/drivers.md); "
+    "replaces the task file's planner.driver.",
 )
 @click.option(
     "--out",
@@ -85,6 +92,7 @@ def plan_command(
     uncertainty: tuple[str, ...],
     seed: int,
     preset: str | None,
+    driver: str | None,
     out: Path | None,
     timeout: float | None,
     workers: int,
@@ -104,6 +112,8 @@ def plan_command(
     loaded = load_task(task, split_uncertainty(uncertainty))
     if preset is not None:
         loaded = with_preset(loaded, preset)
+    if driver is not None:
+        loaded = with_planner(loaded, driver=driver)
     if not allow_start_contact:
         check_start_free(loaded, initial_belief(loaded))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"

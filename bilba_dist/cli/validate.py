@@ -9,12 +9,12 @@ from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import validate_plan
-from bilba_dist.task.loader import build_task, load_task
+from bilba_dist.task.loader import build_task
 
 
 @click.command("validate")
 @click.argument("plan_path", metavar="PLAN", type=click.Path(path_type=Path))
-@click.option("--task", "task_name", help="Task name or file [default: the plan's task].")
+@click.option("--task", "task_name", help="Task name or file [default: the task the plan holds].")
 @click.option(
     "--held-out",
     type=Bounded(0, 10_000, int),
@@ -40,8 +40,7 @@ def validate(
     if friction_scale <= 0:
         raise BilbaError(f"--friction-scale must be positive, got {friction_scale}")
     plan = read_plan(plan_path)
-    overrides = [f"{k}={v}" for k, v in plan.uncertainty.items()]
-    task = load_task(task_name or plan.task_name, overrides)
+    task = plan.task(task_name)
     if friction_scale != 1.0:
         spec = task.spec.model_copy(update={"friction": task.spec.friction * friction_scale})
         task = build_task(spec, task.source)

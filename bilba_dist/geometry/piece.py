@@ -182,6 +182,12 @@ class Part:
     def pieces_by_name(self) -> dict[str, ConvexPiece]:
         return {piece.name: piece for piece in self.pieces}
 
+    def centre(self) -> np.ndarray:
+        """Centre of the part's vertices' bounding box [m, part frame]: where the simulator
+        puts its mass (and the plan file its payload's centre of mass)."""
+        points = np.concatenate([p.vertices for p in self.pieces])
+        return (points.min(axis=0) + points.max(axis=0)) / 2
+
     @property
     def face_names(self) -> list[str]:
         return [f.name for p in self.pieces for f in p.faces]

@@ -28,6 +28,7 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.planning.make_contact import Step, planned_motions
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlanResult
+from bilba_dist.planning.stiffness import driver_fit
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest
 from bilba_dist.task.loader import Task
@@ -88,13 +89,14 @@ def plan_best(
     cells[_cell(b0, low, high)].append(0)
     result = PlanResult(False, "", [], "b-est", seed)
     goal = frozenset([task.goal])
+    fit = driver_fit(task)
     while clock() < deadline:
         occupied = list(cells)
         chosen = []
         for _ in range(batch):
             cell = occupied[int(rng.integers(len(occupied)))]
             chosen.append(cells[cell][int(rng.integers(len(cells[cell])))])
-        motions = [_control(nodes[k].belief, rng) for k in chosen]
+        motions = [_control(nodes[k].belief, rng, fit) for k in chosen]
         requests = [
             RolloutRequest(nodes[k].belief.particles[i], nodes[k].belief.states[i], m)
             for k, m in zip(chosen, motions, strict=True)
@@ -127,7 +129,9 @@ def _mean_X_WM(belief: Belief) -> pin.SE3:
     return mean_pose([s.X_WM for s in belief.states])
 
 
-def _control(belief: Belief, rng: np.random.Generator) -> Motion:
+def _control(
+    belief: Belief, rng: np.random.Generator, fit: Callable[[np.ndarray, pin.SE3], np.ndarray]
+) -> Motion:
     """A random relative twist of the mean gripper pose, stiff gains, random timeout."""
     grippers = [
         s.X_WM * p.X_GM.inverse() for p, s in zip(belief.particles, belief.states, strict=True)
@@ -136,7 +140,7 @@ def _control(belief: Belief, rng: np.random.Generator) -> Motion:
         [rng.uniform(-TWIST_TRANS, TWIST_TRANS, 3), rng.uniform(-TWIST_ROT, TWIST_ROT, 3)]
     )
     G_d = mean_pose(grippers) * pin.exp6(pin.Motion(twist))
-    return Motion(STIFF, G_d, float(rng.uniform(0.0, MAX_TIMEOUT_S)))
+    return Motion(fit(STIFF, G_d), G_d, float(rng.uniform(0.0, MAX_TIMEOUT_S)))
 
 
 def _cell(belief: Belief, low: np.ndarray, high: np.ndarray) -> tuple[int, ...]:

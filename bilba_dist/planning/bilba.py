@@ -33,7 +33,7 @@ from bilba_dist.planning.make_contact import (
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.planning.setpoints import SetpointParams
-from bilba_dist.planning.stiffness import fixed_stiffness, variable_stiffness
+from bilba_dist.planning.stiffness import driver_fit, fixed_stiffness, variable_stiffness
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
@@ -121,6 +121,7 @@ def contact_search(
         evaluator=evaluator,
         cache=SliceCache(task),
         stiffness=_stiffness_rule(task, variant),
+        fit=driver_fit(task),
         setpoints=SetpointParams(
             params.setpoints_per_particle,
             params.noisy_setpoints,

@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 from itertools import chain, zip_longest
 
 import numpy as np
+import pinocchio as pin
 
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.geometry.contact import ContactPair
@@ -20,6 +21,12 @@ from bilba_dist.rollout import Motion
 
 #: ``stiffness(belief, mode, rng)`` → 6×6 K for the next motion.
 StiffnessRule = Callable[[Belief, ContactPair, np.random.Generator], np.ndarray]
+#: ``fit(K, G_d)`` → the K a motion to setpoint ``G_d`` runs with (a driver's form of it).
+StiffnessFit = Callable[[np.ndarray, pin.SE3], np.ndarray]
+
+
+def unchanged(K: np.ndarray, G_d: pin.SE3) -> np.ndarray:
+    return K
 
 
 class PlanningTimeoutError(Exception):
@@ -43,6 +50,10 @@ class ContactSearch:
     race_chunks: int = 2  # chunks of sampled setpoints per contact in a race
     on_progress: Callable[[str, float], None] = field(default=lambda contact, best: None)
     recorder: Recorder = field(default_factory=NullRecorder)
+    fit: StiffnessFit = unchanged  # planner.driver's form of K (planning/stiffness.py)
+
+    def motion(self, K: np.ndarray, G_d: pin.SE3) -> Motion:
+        return Motion(self.fit(K, G_d), G_d, self.motion_timeout_s)
 
 
 @dataclass(frozen=True)
@@ -153,7 +164,7 @@ def sampled_candidates(
     K = search.stiffness(belief, mode, rng)
     per_particle = [
         [
-            Candidate(Motion(K, G_d, search.motion_timeout_s), i)
+            Candidate(search.motion(K, G_d), i)
             for G_d in sample_setpoints(
                 belief.particles[i],
                 belief.states[i].X_WM,
@@ -204,7 +215,7 @@ def best_motion(
         proposals, predicted = propose(train, np.array([s.score for s in scored]), search.gp, rng)
         # Screen GP proposals on a particle not yet in the contact: the one they must move.
         lagging = next((i for i, c in enumerate(belief.contacts) if not c & accept), 0)
-        batch = [Candidate(Motion(K, G_d, search.motion_timeout_s), lagging) for G_d in proposals]
+        batch = [Candidate(search.motion(K, G_d), lagging) for G_d in proposals]
         more, winner = search.evaluator.score(belief, batch, accept, record)
         simulated = max((s.score for s in more), default=0.0)
         search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)

@@ -7,6 +7,7 @@ part of the 6-D C-obs normal, found by finite differences of the contact facet's
 distance over small rotations. ``K = blockdiag(K_r, K_t)`` (rotation first) [N·m/rad, N/m].
 """
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +50,19 @@ def compliant_along(direction: np.ndarray | None, stiff: float, soft: float) -> 
         return stiff * np.eye(3)
     R = frame_with_z(direction)
     return R @ np.diag([stiff, stiff, soft]) @ R.T
+
+
+def driver_fit(task: Task) -> Callable[[np.ndarray, pin.SE3], np.ndarray]:
+    """The task's ``planner.driver`` as a map (K, setpoint G_d) → the K that driver holds for
+    that motion, in the plan's frame (docs/drivers.md: the EE offset turns with the hand, so
+    the fit depends on G_d's rotation); the identity for ``none``."""
+    planner = task.spec.planner
+    if planner.driver == "none":
+        return lambda K, G_d: K
+    from bilba_dist.robot.drivers import DRIVERS, fit_hand
+
+    driver, offset = DRIVERS[planner.driver], np.array(planner.ee_offset_m)
+    return lambda K, G_d: fit_hand(K, G_d.rotation, driver, offset)[0]
 
 
 def variable_stiffness(

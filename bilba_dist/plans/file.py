@@ -1,48 +1,100 @@
 """The plan file: versioned JSON holding everything needed to run the motions on a Panda
-without the planner — per motion K (6×6, rotation first, world axes), G_d (xyz and quaternion
-xyzw, world frame, plus the rotation matrix exactly as simulated), q_d (7 joints), timeout,
-the contact it should reach, and its score — plus the task (name, hash, uncertainty),
-planner, seed, parameters and planning time."""
+without the planner or the task file (docs/plan-file.md). Version 2: the frames and axis
+order stated in the file; per motion K and its damping D (6×6, rotation first, world axes at
+the panda_hand origin), G_d (panda_hand in the world: xyz and quaternion xyzw, plus the
+rotation matrix exactly as simulated), q_d, timeout, the contact it should reach and its
+score; the start joints, the nominal environment pose X_WO, the payload, the controller's
+ramp rates and wrench clip, the driver the plan was made for, and the validated task itself
+(its hash checked on reading). Checked on reading against ``plan-v2.schema.json`` (shipped
+beside this module). Version 1 files still read."""
 
+import hashlib
 import json
 from dataclasses import dataclass
+from functools import cache
+from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
+from pydantic import ValidationError
 
 from bilba_dist import __version__
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
-from bilba_dist.geometry.pose import setpoint_json
+from bilba_dist.geometry.pose import pose_json, setpoint_json
 from bilba_dist.planning.result import PlannedMotion, PlanResult
-from bilba_dist.rollout import is_symmetric_psd
-from bilba_dist.task.loader import Task
-from bilba_dist.task.schema import MAX_MOTION_TIMEOUT_S
+from bilba_dist.rollout import damping, is_symmetric_psd
+from bilba_dist.task.loader import Task, build_task, builtin_tasks, load_task
+from bilba_dist.task.schema import MAX_MOTION_TIMEOUT_S, TaskSpec
 from bilba_dist.task.units import WORKSPACE_M
 from bilba_dist.task.yaml_lines import read_text
+from bilba_dist.workers.settings import SimSettings
 
 FORMAT = "bilba-plan"
-VERSION = 1
+VERSION = 2
+READS = (1, 2)
 #: How far a G_d rotation may be from orthonormal, or from its quaternion, in a plan file.
 ROTATION_TOL = 1e-6
+#: How far a stored D may be from 2·sqrtm(K) (relative, max-abs) before the file is refused.
+DAMPING_TOL = 1e-6
+
+FRAMES = {
+    "world": "panda_link0: the robot's base frame",
+    "setpoint": "G_d is the panda_hand frame in the world, not a driver's EE (TCP) frame",
+    "stiffness": (
+        "K and D act at the panda_hand origin, in world axes, rotation first: [rx, ry, rz, x, y, z]"
+    ),
+    "units": "m, rad, s, kg; K in N·m/rad and N/m; D in N·m·s/rad and N·s/m",
+}
 
 
 def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
+    from bilba_dist.belief.particles import initial_belief
+    from bilba_dist.belief.start import start_state
+
+    nominal = next((p for p in initial_belief(task) if not any(p.offsets.values())), None)
+    nominal = nominal or initial_belief(task)[0]
+    settings, planner = SimSettings(), task.spec.planner
     return {
         "format": FORMAT,
         "version": VERSION,
+        "frames": FRAMES,
+        "robot": {
+            "model": "franka-panda",
+            "hand_frame": "panda_hand",
+            "start_joints": start_state(task, nominal).q.tolist(),
+            "driver": None if planner.driver == "none" else planner.driver,
+            "ee_offset_m": list(planner.ee_offset_m),
+        },
+        "environment": {"X_WO": pose_json(task.X_WO)},
+        "payload": {
+            "mass_kg": task.spec.manipuland.mass,
+            "com_hand_m": task.X_GM.act(task.manipuland.centre()).tolist(),
+            "X_GM": pose_json(task.X_GM),
+        },
+        "controller": {
+            "damping": "2·sqrtm(K)",
+            "ramp": "cartesian" if planner.cartesian_ramp else "joint",
+            "ramp_speed_m_s": settings.ramp_speed_m_s,
+            "ramp_speed_rad_s": settings.ramp_speed_rad_s,
+            "min_ramp_s": settings.min_ramp_s,
+            "wrench_clip": settings.spring_limit,
+            "null_stiffness": settings.null_stiffness,
+            "null_damping": settings.null_damping,
+        },
         "task": {
             "name": task.name,
             "hash": task.hash,
-            "source": task.source,
+            "source": _portable_source(task.source),
             "uncertainty": task.spec.uncertainty,
+            "spec": task.spec.model_dump(mode="json"),
         },
         "planner": result.planner,
         "planner_version": __version__,
         "seed": result.seed,
-        "parameters": task.spec.planner.model_dump(),
+        "parameters": task.spec.planner.model_dump(mode="json"),
         "success": result.success,
         "reason": result.reason,
         "planning_time_s": round(result.planning_time_s, 3),
@@ -51,9 +103,18 @@ def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
     }
 
 
+def _portable_source(source: str) -> str:
+    """A built-in task's name, or the task file's name alone: the plan embeds the task, so
+    the planning machine's paths stay on it."""
+    path = Path(source)
+    builtin = {str(p.resolve()): name for name, p in builtin_tasks().items()}
+    return builtin.get(str(path.resolve()), path.name) if path.suffix else source
+
+
 def _motion(m: PlannedMotion) -> dict[str, Any]:
     return {
         "K": np.asarray(m.K).tolist(),
+        "D": damping(m.K).tolist(),
         "G_d": setpoint_json(m.G_d),
         "q_d": np.asarray(m.q_d).tolist(),
         "timeout_s": m.timeout_s,
@@ -86,12 +147,30 @@ class PlanFile:
     motions: list[PlannedMotion]
 
     @property
+    def version(self) -> int:
+        return int(self.document["version"])
+
+    @property
     def task_name(self) -> str:
         return str(self.document["task"]["name"])
 
     @property
     def uncertainty(self) -> dict[str, float]:
         return dict(self.document["task"].get("uncertainty", {}))
+
+    def task(self, override: str | None = None) -> Task:
+        """The plan's task: the one embedded (version 2), else the built-in or file of its
+        name with its uncertainty; ``override`` (a name or file) replaces either."""
+        if override is None and self.version >= 2:
+            spec = TaskSpec.model_validate(self.document["task"]["spec"])
+            return build_task(spec, str(self.document["task"]["source"]))
+        overrides = [f"{k}={v}" for k, v in self.uncertainty.items()]
+        return load_task(override or self.task_name, overrides)
+
+    @property
+    def start_joints(self) -> np.ndarray | None:
+        robot = self.document.get("robot")
+        return None if robot is None else np.array(robot["start_joints"], dtype=float)
 
 
 #: A plan file larger than this is refused unread [bytes].
@@ -123,16 +202,68 @@ def read_plan(path: Path) -> PlanFile:
         raise BilbaError(f"{path}: not a plan file (nested too deeply)") from None
     if not isinstance(document, dict) or document.get("format") != FORMAT:
         raise BilbaError(f'{path}: not a plan file (no "format": "{FORMAT}")')
-    if document.get("version") != VERSION:
+    version = document.get("version")
+    if version not in READS:
+        shown = json.dumps(version)[:40]
         raise BilbaError(
-            f"{path}: plan file version {document.get('version')}; this reads {VERSION}"
+            f"{path}: plan file version {shown}; this bilba reads versions 1 and 2"
+            + (" (a newer bilba wrote it)" if isinstance(version, int) and version > 2 else "")
         )
+    if version == 2:
+        _check_schema(document, path)
     try:
         motions = [_read_motion(m) for m in document["motions"]]
         document["task"]["name"]
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise BilbaError(f"{path}: malformed plan file: {type(exc).__name__} {exc}") from None
+    if version == 2:
+        _check_damping(document, motions, path)
+        _check_task(document, path)
     return PlanFile(document, motions)
+
+
+@cache
+def plan_schema() -> dict[str, Any]:
+    """The JSON Schema of version 2 (shipped in the package)."""
+    text = (resources.files("bilba_dist.plans") / "plan-v2.schema.json").read_text("utf-8")
+    schema: dict[str, Any] = json.loads(text)
+    return schema
+
+
+def _check_schema(document: dict[str, Any], path: Path) -> None:
+    import jsonschema
+
+    validator = jsonschema.Draft202012Validator(plan_schema())
+    error = jsonschema.exceptions.best_match(validator.iter_errors(document))
+    if error is not None:
+        where = "/".join(str(p) for p in error.absolute_path) or "the top level"
+        message = error.message if len(error.message) <= 160 else error.message[:157] + "..."
+        raise BilbaError(f"{path}: malformed plan file: at {where}: {message}")
+
+
+def _check_damping(document: dict[str, Any], motions: list[PlannedMotion], path: Path) -> None:
+    """Each motion's D must be the 2·sqrtm(K) the plan was simulated with."""
+    for i, (m, motion) in enumerate(zip(document["motions"], motions, strict=True)):
+        expected, D = damping(motion.K), np.array(m["D"], dtype=float)
+        if not np.abs(D - expected).max() <= DAMPING_TOL * max(1.0, np.abs(expected).max()):
+            raise BilbaError(f"{path}: malformed plan file: motions/{i}/D is not 2·sqrtm(K)")
+
+
+def _check_task(document: dict[str, Any], path: Path) -> None:
+    """The embedded task must validate and match its hash (an edited task would execute
+    a plan on parts it was not made for)."""
+    task = document["task"]
+    try:
+        spec = TaskSpec.model_validate(task["spec"])
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        where = ".".join(str(p) for p in first["loc"])
+        raise BilbaError(
+            f"{path}: malformed plan file: task.spec.{where}: {first['msg']}"
+        ) from None
+    canonical = json.dumps(spec.model_dump(mode="json"), sort_keys=True)
+    if hashlib.sha256(canonical.encode()).hexdigest() != task["hash"]:
+        raise BilbaError(f"{path}: the embedded task does not match its hash (edited?)")
 
 
 def _read_motion(m: dict[str, Any]) -> PlannedMotion:

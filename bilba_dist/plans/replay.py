@@ -1,6 +1,7 @@
 """Replaying a plan: run its motions, in order, on every particle of a belief."""
 
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 from bilba_dist.belief.particles import Particle, initial_belief, make_particle, random_offsets
@@ -11,13 +12,14 @@ from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest
 from bilba_dist.task.loader import Task
 
 
-def replay(
+def run_motions(
     task: Task,
     motions: Sequence[PlannedMotion],
     particles: Sequence[Particle],
     backend: RolloutBackend,
-) -> Belief:
-    """The belief after the plan, from every particle's start state (one batch per motion)."""
+) -> Iterator[Belief]:
+    """The belief after each motion in turn, from every particle's start state (one batch
+    per motion)."""
     belief = start_belief(task, particles)
     for planned in motions:
         motion = Motion(planned.K, planned.G_d, planned.timeout_s)
@@ -26,7 +28,18 @@ def replay(
             for p, s in zip(belief.particles, belief.states, strict=True)
         ]
         belief = belief.after(backend.simulate(requests))
-    return belief
+        yield belief
+
+
+def replay(
+    task: Task,
+    motions: Sequence[PlannedMotion],
+    particles: Sequence[Particle],
+    backend: RolloutBackend,
+) -> Belief:
+    """The belief after the plan, from every particle's start state."""
+    beliefs = deque(run_motions(task, motions, particles, backend), maxlen=1)
+    return beliefs[0] if beliefs else start_belief(task, particles)
 
 
 def success_fraction(belief: Belief, task: Task) -> float:

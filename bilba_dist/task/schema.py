@@ -244,6 +244,20 @@ class PlannerParams(Strict):
     # contact sits at about -0.01 mm, and a 1 mm threshold flips on pegs resting 0.99 mm
     # from a wall (measured: early-stopped vs full-length rollouts disagreed on 1 in 50).
     contact_distance_m: float = Field(default=2e-4, ge=0, le=0.01)
+    # Plan within one Franka driver's form of stiffness and its limits (docs/drivers.md):
+    # every candidate K is made what that driver can hold before it is simulated, so the plan
+    # exports without approximation. "none": any symmetric PSD K (what franky takes).
+    driver: Literal["none", "franky", "panda-py", "libfranka", "franka-ros"] = "none"
+    # The driver's EE (Desk's TCP) origin in the panda_hand frame [m]: the Franka Hand's
+    # default is 0.1034 m along z. Used with `driver`, and by `bilba export`.
+    ee_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.1034)
+
+    @field_validator("ee_offset_m")
+    @classmethod
+    def _offset_range(cls, value: tuple[float, float, float]) -> tuple[float, float, float]:
+        if max(abs(v) for v in value) > 0.5:
+            raise ValueError("the EE offset must be within 0.5 m of panda_hand on each axis")
+        return value
 
 
 class TaskSpec(Strict):

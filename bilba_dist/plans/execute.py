@@ -1,0 +1,96 @@
+"""`bilba execute`: a plan run in simulation as a driver would run it, motion by motion.
+
+With a driver each motion's stiffness is the one `bilba export` gives that driver (fitted to
+its form and limits, `plans.export.driver_motions`), the setpoint ramps along the hand's
+straight line (every exported script ramps the EE pose), and a driver that cannot bound the
+spring wrench runs without the planner's clip. Without one, the plan runs as planned.
+"""
+
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from bilba_dist.belief.particles import Particle, initial_belief, make_particle
+from bilba_dist.belief.state import Belief
+from bilba_dist.errors import BilbaError
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.planning.result import PlannedMotion
+from bilba_dist.plans.export import Export
+from bilba_dist.plans.file import PlanFile
+from bilba_dist.plans.replay import run_motions
+from bilba_dist.rollout import RolloutBackend
+from bilba_dist.task.loader import Task
+from bilba_dist.task.schema import parse_axis_values
+
+
+def parse_particle(text: str) -> dict[str, float]:
+    """``"grasp.x=3mm env.y=-1mm"`` (or comma-separated) → signed offsets in SI units."""
+    raw = {}
+    for item in text.replace(",", " ").split():
+        key, sep, value = item.partition("=")
+        if not sep or not key or not value:
+            raise BilbaError(f"--particle {text!r}: write AXIS=VALUE, e.g. grasp.x=3mm")
+        if key in raw:
+            raise BilbaError(f"--particle {text!r}: {key} given twice")
+        raw[key] = value
+    if not raw:
+        raise BilbaError("--particle: give at least one AXIS=VALUE, e.g. grasp.x=3mm")
+    try:
+        return parse_axis_values(raw, prefix="")
+    except ValueError as exc:
+        raise BilbaError(f"--particle {text!r}: {exc}") from None
+
+
+def particles_for(task: Task, extra: Sequence[dict[str, float]]) -> tuple[Particle, ...]:
+    """The plan's planning particles, then one per ``--particle``."""
+    return initial_belief(task) + tuple(make_particle(task, o) for o in extra)
+
+
+def driven_motions(plan: PlanFile, export: Export | None) -> list[PlannedMotion]:
+    """The plan's motions with each K replaced by what the driver holds."""
+    if export is None:
+        return list(plan.motions)
+    return [replace(m, K=d.K_hand) for m, d in zip(plan.motions, export.motions, strict=True)]
+
+
+@dataclass(frozen=True)
+class Step:
+    """One motion's outcome: which particles are in the contact it was meant to reach."""
+
+    intended: ContactPair
+    reached: list[bool]
+    contacts: list[str]
+
+
+def describe(particle: Particle) -> str:
+    offsets = ", ".join(f"{k}={v:+.4g}" for k, v in particle.offsets.items() if v)
+    return offsets or "nominal"
+
+
+def steps_of(
+    task: Task,
+    motions: Sequence[PlannedMotion],
+    particles: Sequence[Particle],
+    backend: RolloutBackend,
+) -> Iterator[tuple[Step, Belief]]:
+    for planned, belief in zip(
+        motions, run_motions(task, motions, particles, backend), strict=False
+    ):
+        reached = [planned.contact in c for c in belief.contacts]
+        shown = [", ".join(sorted(map(str, c))) or "free" for c in belief.contacts]
+        yield Step(planned.contact, reached, shown), belief
+
+
+def final_misses(task: Task, belief: Belief) -> list[int]:
+    """Indices of the particles not in the goal contact at the end."""
+    return [i for i, c in enumerate(belief.contacts) if task.goal not in c]
+
+
+def ee_offset_of(plan: PlanFile, given: tuple[float, ...] | None) -> np.ndarray:
+    """``--ee-offset`` (one number: along the hand's z; or x y z) or the plan's own."""
+    if given is not None:
+        values = list(given)
+        return np.array([0.0, 0.0, values[0]] if len(values) == 1 else values, dtype=float)
+    robot = plan.document.get("robot") or {}
+    return np.array(robot.get("ee_offset_m", [0.0, 0.0, 0.1034]), dtype=float)

@@ -1,0 +1,340 @@
+"""Plans toward a real Panda: frames, driver fits, exported scripts, `bilba execute`.
+
+The exported scripts are checked against franky-control, panda-python and pylibfranka as
+installed (the dev extra), without a robot: each script's ``build()`` makes its driver
+objects for real, and every method its ``main()`` calls on a robot-side object must exist
+on that class with the keywords used (pybind11 signatures, read from the docstrings)."""
+
+import ast
+import importlib.util
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from scipy.linalg import sqrtm
+
+from bilba_dist.planning.stiffness import VERY_STIFF
+from bilba_dist.robot.drivers import (
+    DEFAULT_EE_OFFSET_M,
+    DRIVER_NAMES,
+    DRIVERS,
+    ee_to_hand,
+    fit,
+    fit_hand,
+    hand_to_ee,
+    to_ee,
+    to_hand,
+)
+from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
+from tests.test_task_files import run_cli
+
+ROOT = Path(__file__).resolve().parents[1]
+OFFSET = np.array([0.0, 0.0, DEFAULT_EE_OFFSET_M])
+finite = st.floats(-1.0, 1.0, allow_nan=False)
+
+
+def psd(A: np.ndarray) -> np.ndarray:
+    return 300.0 * A @ A.T
+
+
+@given(arrays(float, (6, 6), elements=finite), arrays(float, 3, elements=st.floats(-0.3, 0.3)))
+def test_stiffness_moves_between_hand_and_ee_by_the_adjoint(A, r):
+    """Round trip hand → EE → hand, and the spring energy of one body displacement is the
+    same measured at either point."""
+    K = psd(A)
+    K_ee = to_ee(K, r)
+    assert np.allclose(to_hand(K_ee, r), K, atol=1e-9 * max(1.0, np.abs(K).max()))
+    d = np.array([0.01, -0.02, 0.03, 0.001, 0.002, -0.003])  # [ω; v] at the hand
+    w, v = d[:3], d[3:]
+    d_ee = np.concatenate([v + np.cross(w, r), w])  # [v; ω] at the EE, translation first
+    assert d @ K @ d == pytest.approx(d_ee @ K_ee @ d_ee, rel=1e-9, abs=1e-12)
+
+
+def test_setpoints_move_between_hand_and_ee():
+    G = pin.SE3(pin.utils.rotate("x", np.pi) @ pin.utils.rotate("z", 0.3), np.array([0.5, 0, 0.3]))
+    X_WE = hand_to_ee(G, OFFSET)
+    assert np.allclose(X_WE.translation, G.translation - [0, 0, DEFAULT_EE_OFFSET_M])
+    assert ee_to_hand(X_WE, OFFSET).isApprox(G)
+
+
+@pytest.mark.parametrize("name", DRIVER_NAMES)
+@given(arrays(float, (6, 6), elements=finite))
+def test_each_fit_is_a_stiffness_the_driver_takes(name, A):
+    """PSD, of the driver's form, inside its limits, and a fixed point: fitting again
+    changes nothing and says so."""
+    driver = DRIVERS[name]
+    fitted = fit(psd(A), driver)
+    K = fitted.K_ee
+    assert np.allclose(K, K.T) and np.linalg.eigvalsh(K).min() >= -1e-9
+    block = np.kron(np.eye(2), fitted.frame)
+    inner = block.T @ K @ block
+    if driver.form != "full":
+        assert np.allclose(inner, np.diag(np.diag(inner)), atol=1e-9)
+        assert np.allclose(fitted.frame.T @ fitted.frame, np.eye(3))
+    low, high = driver.translational
+    assert np.all(np.diag(inner)[:3] >= low - 1e-9) and np.all(np.diag(inner)[:3] <= high + 1e-9)
+    low, high = driver.rotational
+    assert np.all(np.diag(inner)[3:] >= low - 1e-9) and np.all(np.diag(inner)[3:] <= high + 1e-9)
+    if driver.form == "scalar":
+        assert np.allclose(np.diag(inner)[:3], inner[0, 0])
+    again = fit(K, driver)
+    assert np.allclose(again.K_ee, K) and again.changes == []
+
+
+def test_every_clamp_and_projection_is_reported_with_its_size():
+    _, ros = fit_hand(VERY_STIFF, pin.utils.rotate("x", np.pi), DRIVERS["franka-ros"], OFFSET)
+    assert ros.changes[0].startswith("made isotropic: ")
+    assert "translational 600.0 → 400.0 N/m" in ros.changes[1]
+    assert re.search(r"rotational 10\d\.\d → 30\.0 N·m/rad", ros.changes[2])
+    soft = np.diag([0.5, 0.5, 0.5, 5.0, 5.0, 5.0])  # rotation first, hand frame
+    _, lib = fit_hand(soft, np.eye(3), DRIVERS["libfranka"], np.zeros(3))
+    assert [c.split()[0:2] for c in lib.changes] == [
+        ["x", "5.0"],
+        ["y", "5.0"],
+        ["z", "5.0"],
+        ["rx", "0.5"],
+        ["ry", "0.5"],
+        ["rz", "0.5"],
+    ]
+    _, full = fit_hand(VERY_STIFF, np.eye(3), DRIVERS["franky"], OFFSET)
+    assert full.changes == []
+
+
+# -- exported scripts ---------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def peg_plan(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plan") / "peg.json"
+    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def load_script(path):
+    spec = importlib.util.spec_from_file_location(path.stem.replace("-", "_"), path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def robot_classes(target: str) -> dict[str, list[type]]:
+    """Variable name in the scripts' main() → the classes it may hold."""
+    if target == "franky":
+        import franky
+
+        return {
+            "robot": [franky.Robot],
+            "motion": [franky.CartesianImpedanceTrackingMotion],
+            "pose": [franky.Affine],
+        }
+    if target == "panda-py":
+        import panda_py
+        from panda_py import controllers
+
+        return {
+            "panda": [panda_py.Panda],
+            "controller": [controllers.CartesianImpedance],
+            "ctx": [panda_py._core.PandaContext],
+        }
+    import pylibfranka
+
+    return {
+        "robot": [pylibfranka.Robot],
+        "control": [pylibfranka.ActiveControlBase],
+        "state": [pylibfranka.RobotState],
+        "period": [pylibfranka.Duration],
+        "command": [pylibfranka.CartesianPose, pylibfranka.JointPositions],
+    }
+
+
+def keywords(member) -> set[str]:
+    """Parameter names of a pybind11 method, from its docstring's signature lines."""
+    names = set()
+    for line in (member.__doc__ or "").splitlines():
+        if "(" in line and ") ->" in line:
+            names |= set(re.findall(r"[(,]\s*(\w+):", line))
+    return names
+
+
+def check_calls(source: str, classes: dict[str, list[type]]) -> int:
+    """Every attribute used on a robot-side variable exists on its class; every keyword
+    passed to one of its methods is a parameter of that method. Returns how many."""
+    checked = 0
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            owners = classes.get(node.value.id)
+            if owners is None:
+                continue
+            assert any(hasattr(c, node.attr) for c in owners), f"{node.value.id}.{node.attr}"
+            checked += 1
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute):
+            base = node.func.value
+            if isinstance(base, ast.Name) and base.id in classes and node.keywords:
+                member = next(
+                    getattr(c, node.func.attr)
+                    for c in classes[base.id]
+                    if hasattr(c, node.func.attr)
+                )
+                for kw in node.keywords:
+                    assert kw.arg in keywords(member), f"{base.id}.{node.func.attr}({kw.arg}=)"
+    return checked
+
+
+def check_script(script: str, target: str, plan: str) -> None:
+    """Everything checked of one exported script; run in its own process by the test
+    (panda-python and pylibfranka each register a pybind11 type "Duration": one process
+    cannot import both)."""
+    source = Path(script).read_text()
+    compile(source, script, "exec")
+    module = load_script(Path(script))
+    document = json.loads(Path(plan).read_text())
+    assert document["robot"]["start_joints"] == module.START_JOINTS
+    assert len(module.MOTIONS) == len(document["motions"])
+    built = module.build()  # the driver's own objects, made without a robot
+    assert len(built) == len(document["motions"])
+    main = next(n for n in ast.parse(source).body if getattr(n, "name", "") == "main")
+    assert check_calls(ast.unparse(main), robot_classes(target)) >= 5
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.ImportFrom):
+            package = importlib.import_module(node.module)
+            assert all(hasattr(package, alias.name) for alias in node.names), node.module
+    motion = document["motions"][0]
+    G_d = pin.SE3(np.array(motion["G_d"]["rotation"]), np.array(motion["G_d"]["xyz"]))
+    K_ee = to_ee(np.array(motion["K"]), G_d.rotation @ OFFSET)
+    assert np.allclose(module.MOTIONS[0]["position"], hand_to_ee(G_d, OFFSET).translation)
+    if target == "franky":  # what franky holds is the plan's K at the EE, exactly
+        assert np.allclose(built[0].get_gains().stiffness, K_ee)
+        assert np.allclose(built[0].get_gains().damping, 2 * sqrtm(K_ee))
+    if target == "libfranka":  # the diagonal in the stiffness frame, frame given to set_K
+        EE_T_K = np.array(built[0][0]).reshape(4, 4, order="F")
+        R_WK = G_d.rotation @ EE_T_K[:3, :3]
+        block = np.kron(np.eye(2), R_WK)
+        fitted = fit(K_ee, DRIVERS["libfranka"]).K_ee
+        assert np.allclose(block.T @ fitted @ block, np.diag(built[0][1]))
+
+
+@pytest.mark.parametrize("target", ["franky", "panda-py", "libfranka"])
+def test_exported_scripts_use_only_what_the_driver_has(peg_plan, target, tmp_path):
+    out = tmp_path / f"plan-{target}.py"
+    result = run_cli("export", str(peg_plan), "--target", target, "--out", str(out))
+    assert result.exit_code == 0, result.output
+    code = "import sys; from tests.test_drivers import check_script; check_script(*sys.argv[1:])"
+    checked = subprocess.run(
+        [sys.executable, "-c", code, str(out), target, str(peg_plan)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert checked.returncode == 0, checked.stderr[-3000:]
+
+
+def test_franka_ros_parameters_are_its_scalars_within_limits(peg_plan, tmp_path):
+    out = tmp_path / "ros.yaml"
+    result = run_cli("export", str(peg_plan), "--target", "franka-ros", "--out", str(out))
+    assert result.exit_code == 0
+    assert "warning: motion 1: made isotropic" in result.stderr
+    assert re.search(r"motion 1: translational \d+\.\d → 400.0 N/m", result.stderr)
+    data = yaml.safe_load(out.read_text())
+    for m in data["motions"]:
+        assert 0 < m["translational_stiffness"] <= 400 and 0 < m["rotational_stiffness"] <= 30
+        assert m["equilibrium_pose"]["frame_id"] == "panda_link0"
+
+
+# -- bilba execute ------------------------------------------------------------------------
+
+
+def test_execute_runs_the_default_plan_to_the_goal(peg_plan):
+    result = run_cli("execute", str(peg_plan), "--particle", "grasp.pitch=1deg")
+    assert result.exit_code == 0, result.output
+    assert "goal       (floor/+z, peg/-z): 4 of 4 particles" in result.output
+    assert re.search(r"motion 1 +meant \(.*\): 4 of 4 reached", result.output)
+
+
+def test_execute_names_the_particles_a_driver_loses(peg_plan):
+    """The default plan (stiffer than franka-ros allows) run with its scalar gains: the
+    command says which particles miss and where they are."""
+    result = run_cli("execute", str(peg_plan), "--driver", "franka-ros")
+    assert result.exit_code == 1, result.output
+    assert "missed by  particle 0 (nominal)" in result.output
+    assert re.search(r"particle \d \(.*\) is in \(", result.output)
+
+
+@pytest.fixture(scope="module")
+def own_task(tmp_path_factory):
+    """A task of our own: a hexagonal peg, 2 mm clearance, 5 mm chamfer."""
+    path = tmp_path_factory.mktemp("task") / "hexagon.yaml"
+    data = peg_in_hole_task("hexagon", [regular_polygon(6, 0.055)], 0.002, 0.005)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+@pytest.mark.parametrize("driver", ["franka-ros", "libfranka"])
+def test_a_plan_made_for_a_driver_executes_with_it(own_task, driver, tmp_path):
+    out = tmp_path / "plan.json"
+    result = run_cli("plan", str(own_task), "--driver", driver, "--workers", "0", "--no-log",
+                     "--out", str(out), "-u", "grasp.x=5mm")  # fmt: skip
+    assert result.exit_code == 0, result.output
+    document = json.loads(out.read_text())
+    assert document["robot"]["driver"] == driver
+    exported = run_cli("export", str(out), "--target", driver, "--out", str(tmp_path / "x"))
+    assert "% of |K|" not in exported.stderr and "limit" not in exported.stderr
+    executed = run_cli("execute", str(out), "--driver", driver)
+    assert executed.exit_code == 0, executed.output
+    assert "3 of 3 particles" in executed.output
+
+
+def test_plan_files_of_version_1_still_read_and_execute(tmp_path):
+    v1 = Path(__file__).parent / "data" / "peg-plan-v1.json"
+    result = run_cli("execute", str(v1))
+    assert result.exit_code == 0, result.output
+    refused = run_cli("export", str(v1), "--target", "franky", "--out", str(tmp_path / "x.py"))
+    assert refused.exit_code == 2 and "no start joints" in refused.stderr
+
+
+def test_the_plan_schema_is_valid_and_describes_what_we_write(peg_plan):
+    import jsonschema
+
+    from bilba_dist.plans.file import plan_schema
+
+    jsonschema.Draft202012Validator.check_schema(plan_schema())
+    document = json.loads(peg_plan.read_text())
+    jsonschema.Draft202012Validator(plan_schema()).validate(document)
+    assert set(document) == set(plan_schema()["properties"])
+
+
+@pytest.mark.parametrize(
+    ("args", "fragment"),
+    [
+        (["execute", "{plan}", "--particle", "grasp.q=3mm"], "--particle 'grasp.q=3mm'"),
+        (["execute", "{plan}", "--particle", "grasp.x=nan"], "--particle"),
+        (["execute", "{plan}", "--particle", "grasp.x=1mm,grasp.x=2mm"], "given twice"),
+        (["execute", "{broken}"], "malformed plan file"),
+        (["execute", "{plan}", "--gui"], "--gui needs a display"),
+        (["export", "{plan}", "--target", "franky", "--ee-offset", "0.1,0.2"], "three"),
+        (["export", "{plan}", "--target", "franky", "--ee-offset", "9"], "is not within"),
+        (["export", "{missing}", "--target", "franky"], "missing.json"),
+    ],
+)
+def test_bad_input_to_execute_and_export_is_one_line(peg_plan, args, fragment, tmp_path,
+                                                     monkeypatch):  # fmt: skip
+    monkeypatch.delenv("DISPLAY", raising=False)
+    broken = tmp_path / "broken.json"
+    document = json.loads(peg_plan.read_text())
+    document["motions"][0]["timeout_s"] = "five"
+    broken.write_text(json.dumps(document))
+    paths = {"plan": peg_plan, "broken": broken, "missing": tmp_path / "missing.json"}
+    result = run_cli(*[a.format(**paths) for a in args])
+    assert result.exit_code == 2, result.output
+    assert "Traceback" not in result.output and fragment in result.output
+    assert len(result.output.strip().splitlines()) == 1 or "Usage:" in result.output
