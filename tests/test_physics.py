@@ -177,7 +177,7 @@ def test_pinocchio_gravity_and_jacobian_match_pybullet(nominal_peg):
             robot, q.tolist(), [0.0] * 7, [0.0] * 7, physicsClientId=client
         )
         assert np.allclose(g, g_bullet, atol=1e-8)
-        sim.reset(particle.X_WO, q, np.zeros(7))
+        sim.reset(particle.X_WO, q, np.zeros(7), (1.0, 1.0))
         linear, angular = p.calculateJacobian(
             robot,
             hand,

@@ -86,8 +86,11 @@ class FloatingSim:
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
 
-    def reset(self, X_WO: pin.SE3, X_WM: pin.SE3, V_WM: np.ndarray) -> None:
+    def reset(self, X_WO: pin.SE3, X_WM: pin.SE3, V_WM: np.ndarray, friction: float = 1.0) -> None:
+        """``friction``: the particle's scale factor (the floating model's mass is the
+        hand's virtual mass, so a mass axis does not act on it)."""
         p.restoreState(self.clean, physicsClientId=self.client)
+        self.env.set_friction(self.task.spec.friction * friction)
         self.env.forget_contacts()
         self.env.place(X_WO)
         p.resetBasePositionAndOrientation(
@@ -109,9 +112,14 @@ class FloatingSim:
         return X_WM, np.array([*angular, *linear])
 
     def rollout(
-        self, X_WO: pin.SE3, X_GM: pin.SE3, start: ParticleState, motion: Motion
+        self,
+        X_WO: pin.SE3,
+        X_GM: pin.SE3,
+        start: ParticleState,
+        motion: Motion,
+        friction: float = 1.0,
     ) -> RolloutResult:
-        self.reset(X_WO, start.X_WM, start.V_WM)
+        self.reset(X_WO, start.X_WM, start.V_WM, friction)
         steps, settled = self._run(X_GM, start.X_WM * X_GM.inverse(), motion)
         X_WM, V_WM = self.read()
         contacts = label_final_contacts(

@@ -100,9 +100,21 @@ class PandaSim:
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
 
-    def reset(self, X_WO: pin.SE3, q: np.ndarray, dq: np.ndarray) -> None:
-        """Put the world in a known state: no history carries over between rollouts."""
+    def reset(
+        self, X_WO: pin.SE3, q: np.ndarray, dq: np.ndarray, physics: tuple[float, float]
+    ) -> None:
+        """Put the world in a known state: no history carries over between rollouts.
+        ``physics``: the particle's friction and mass scale factors, set every time (the
+        controller's model keeps the nominal payload: the robot does not know the mass)."""
         p.restoreState(self.clean, physicsClientId=self.client)
+        friction, mass = physics
+        self.env.set_friction(self.task.spec.friction * friction)
+        p.changeDynamics(
+            self.robot,
+            self.part_link,
+            mass=self.task.spec.manipuland.mass * mass,
+            physicsClientId=self.client,
+        )
         self.env.forget_contacts()
         self.env.place(X_WO)
         for j, qi, dqi in zip(self.joints, q, dq, strict=True):
@@ -123,8 +135,14 @@ class PandaSim:
         X_WM = pin.XYZQUATToSE3(np.array([*state[4], *state[5]]))
         return X_WM, np.array([*state[7], *state[6]])
 
-    def rollout(self, X_WO: pin.SE3, start: ParticleState, motion: Motion) -> RolloutResult:
-        self.reset(X_WO, start.q, start.dq)
+    def rollout(
+        self,
+        X_WO: pin.SE3,
+        start: ParticleState,
+        motion: Motion,
+        physics: tuple[float, float] = (1.0, 1.0),
+    ) -> RolloutResult:
+        self.reset(X_WO, start.q, start.dq, physics)
         try:
             q_d = self.model.ik(motion.G_d, start.q)
         except UnreachableError:

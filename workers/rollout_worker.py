@@ -89,9 +89,11 @@ class RolloutWorker:
         particle = request.particle
         if self.model == "floating":
             return self._floating_sim().rollout(
-                particle.X_WO, particle.X_GM, request.state, request.motion
+                particle.X_WO, particle.X_GM, request.state, request.motion, particle.friction_scale
             )
-        return self.panda_sim(particle.X_GM).rollout(particle.X_WO, request.state, request.motion)
+        physics = (particle.friction_scale, particle.mass_scale)
+        sim = self.panda_sim(particle.X_GM)
+        return sim.rollout(particle.X_WO, request.state, request.motion, physics)
 
     def panda_sim(self, X_GM: pin.SE3) -> PandaSim:
         key = grasp_key(X_GM)

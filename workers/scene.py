@@ -90,6 +90,10 @@ class EnvironmentBodies:
             offsets.append(X_OP)
         return cls(client, part, bodies, offsets)
 
+    def set_friction(self, friction: float) -> None:
+        for body in self.bodies:
+            p.changeDynamics(body, -1, lateralFriction=friction, physicsClientId=self.client)
+
     def forget_contacts(self) -> None:
         """Drop every contact the world remembers: with the environment far away, collision
         detection removes the broadphase pairs and their contact manifolds. restoreState

@@ -1,9 +1,11 @@
 """Particles and the belief generators of a task.
 
-A particle is one guess of the uncertain transforms: the grasp ``X_GM`` and the environment
-pose ``X_WO``. An offset on an axis is added to that pose's xyz [m] or roll-pitch-yaw [rad]
-parameters, the way the task file writes poses (``grasp.pitch=2deg`` tilts the part about its
-own origin; ``env.y=1cm`` moves the environment along the world y axis).
+A particle is one guess of the uncertain transforms — the grasp ``X_GM`` and the environment
+pose ``X_WO`` — and of the physical parameters given as axes (friction, the part's mass,
+relative to the task's values). An offset on a pose axis is added to that pose's xyz [m] or
+roll-pitch-yaw [rad] parameters, the way the task file writes poses (``grasp.pitch=2deg``
+tilts the part about its own origin; ``env.y=1cm`` moves the environment along the world y
+axis); ``friction=50%`` makes particles at 1.5 and 0.5 times the task's μ.
 """
 
 from collections.abc import Mapping
@@ -24,11 +26,20 @@ from bilba_dist.task.schema import (
 
 @dataclass(frozen=True)
 class Particle:
-    """One guess of the grasp ``X_GM`` and the environment pose ``X_WO``."""
+    """One guess of the grasp ``X_GM``, the environment pose ``X_WO`` and, as scale factors
+    on the task's values, the friction coefficient and the manipuland's mass."""
 
     X_GM: pin.SE3
     X_WO: pin.SE3
-    offsets: Mapping[str, float] = field(default_factory=dict)  # axis key -> offset [m|rad]
+    offsets: Mapping[str, float] = field(default_factory=dict)  # axis -> offset [m|rad|1]
+
+    @property
+    def friction_scale(self) -> float:
+        return 1.0 + self.offsets.get("friction", 0.0)
+
+    @property
+    def mass_scale(self) -> float:
+        return 1.0 + self.offsets.get("mass", 0.0)
 
     def X_OM(self, X_WG: pin.SE3) -> pin.SE3:
         """The manipuland in the environment frame with the gripper at ``X_WG``."""
@@ -41,7 +52,8 @@ def make_particle(task: Task, offsets: Mapping[str, float]) -> Particle:
     moved: dict[str, list[float]] = {k: [*p.xyz, *p.rpy] for k, p in poses.items()}
     for key, value in offsets.items():
         frame, axis = check_axis_key(key)
-        moved[frame][AXES.index(axis)] += value
+        if frame != "physical":  # friction and mass: read by the simulator from offsets
+            moved[frame][AXES.index(axis)] += value
     return Particle(
         X_GM=pose_from_xyz_rpy(moved["grasp"][:3], moved["grasp"][3:]),
         X_WO=pose_from_xyz_rpy(moved["env"][:3], moved["env"][3:]),

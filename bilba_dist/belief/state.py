@@ -6,7 +6,7 @@ the schedule, so a motion that carries a particle past F (into the next contact,
 goal) counts as progress rather than failure."""
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import pinocchio as pin
 
@@ -25,17 +25,25 @@ class Belief:
     particles: tuple[Particle, ...]
     states: tuple[ParticleState, ...]
     contacts: tuple[ContactSet, ...]
+    #: The check particles (robust acceptance, planning/evaluate.py) at the same point of the
+    #: plan: not planned on, but a motion is accepted only if it also brings them along.
+    #: None when there are none, or when a posterior's were not simulated yet.
+    check: "Belief | None" = None
 
     def __len__(self) -> int:
         return len(self.particles)
 
     def after(self, results: Sequence[RolloutResult]) -> "Belief":
-        """The posterior: each particle's state and contacts after its rollout."""
+        """The posterior: each particle's state and contacts after its rollout (its check
+        particles not yet simulated: None)."""
         return Belief(
             self.particles,
             tuple(r.state for r in results),
             tuple(r.contacts for r in results),
         )
+
+    def with_check(self, check: "Belief | None") -> "Belief":
+        return replace(self, check=check)
 
     def __getitem__(self, part: slice) -> "Belief":
         """The belief of a slice of the particles."""

@@ -8,8 +8,9 @@ from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
-from bilba_dist.plans.replay import validate_plan
+from bilba_dist.plans.replay import success_map, validate_plan
 from bilba_dist.task.loader import build_task
+from bilba_dist.task.schema import parse_axis_values
 
 
 @click.command("validate")
@@ -26,6 +27,26 @@ from bilba_dist.task.loader import build_task
 @click.option(
     "--seed", type=SEED, default=0, show_default=True, help="Seed for the held-out particles."
 )
+@click.option(
+    "--map",
+    "maps",
+    multiple=True,
+    metavar="AXIS=BOUND",
+    help="Also map success over a grid of one or two axes from -BOUND to +BOUND (the others "
+    "nominal), e.g. --map grasp.x=2cm --map friction=50%; writes PNG and CSV.",
+)
+@click.option(
+    "--points",
+    type=Bounded(2, 101, int),
+    default=11,
+    show_default=True,
+    help="Grid points per --map axis.",
+)
+@click.option(
+    "--map-out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Where the map goes: PREFIX.png and PREFIX.csv [default: PLAN without .json, -map].",
+)
 @workers_option
 @user_errors
 def validate(
@@ -34,11 +55,15 @@ def validate(
     held_out: int,
     friction_scale: float,
     seed: int,
+    maps: tuple[str, ...],
+    points: int,
+    map_out: Path | None,
     workers: int,
 ) -> None:
     """Replay PLAN and print the fraction of particles that end in the goal contact."""
     if friction_scale <= 0:
         raise BilbaError(f"--friction-scale must be positive, got {friction_scale}")
+    bounds = map_bounds(maps)
     plan = read_plan(plan_path)
     task = plan.task(task_name)
     if friction_scale != 1.0:
@@ -50,6 +75,7 @@ def validate(
 
     with rollout_backend(task, workers) as backend:
         result = validate_plan(task, plan.motions, backend, held_out, seed)
+        grid = success_map(task, plan.motions, backend, bounds, points) if bounds else None
     click.echo(f"plan       {plan_path} ({len(plan.motions)} motions, task {task.name})")
     click.echo(f"planning belief: {result.planning:.3f} of {result.n_planning} reach {task.goal}")
     if result.held_out is not None:
@@ -57,3 +83,38 @@ def validate(
             f"held out:        {result.held_out:.3f} of {held_out} (seed {seed}, "
             f"friction x{friction_scale:g})"
         )
+    if grid is not None:
+        prefix = map_out or plan_path.with_name(plan_path.stem + "-map")
+        csv, png = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
+        try:
+            csv.write_text(grid.csv(), encoding="utf-8")
+            grid.png(png, f"{plan_path.name}, friction x{friction_scale:g}")
+        except OSError as exc:
+            raise BilbaError(f"{prefix}: cannot write the map: {exc.strerror or exc}") from None
+        axes = " x ".join(f"{a} ±{maps[k].partition('=')[2]}" for k, a in enumerate(grid.axes))
+        click.echo(
+            f"map:             {grid.success.mean():.3f} of {grid.success.size} over {axes} "
+            f"-> {png}, {csv}"
+        )
+
+
+def map_bounds(maps: tuple[str, ...]) -> dict[str, float]:
+    """``--map`` options as {axis: bound}: one or two distinct axes, bounds > 0."""
+    if len(maps) > 2:
+        raise BilbaError("--map: give one or two axes")
+    raw = {}
+    for item in maps:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            raise BilbaError(f"--map {item!r}: write AXIS=BOUND, e.g. grasp.x=2cm")
+        if key.strip() in raw:
+            raise BilbaError(f"--map: {key.strip()} given twice")
+        raw[key.strip()] = value.strip()
+    try:
+        bounds = parse_axis_values(raw, prefix="")
+    except ValueError as exc:
+        raise BilbaError(f"--map: {exc}") from None
+    bad = [k for k, v in bounds.items() if v <= 0]
+    if bad:
+        raise BilbaError(f"--map: bounds must be > 0: {', '.join(bad)}")
+    return bounds

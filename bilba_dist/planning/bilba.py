@@ -10,7 +10,7 @@ from typing import Literal
 
 import numpy as np
 
-from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.particles import Particle, initial_belief, make_particle, random_offsets
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import NoScheduleError
@@ -79,7 +79,7 @@ def plan(
     params = task.spec.planner
     particles = initial_belief(task)
     panda = PandaModel()
-    b0 = start_belief(task, particles)
+    b0 = start_belief(task, particles).with_check(check_belief(task, particles))
     result = PlanResult(False, "", [], variant, seed)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
     deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
@@ -105,6 +105,28 @@ def plan(
     result.planning_time_s = clock() - started
     result.rollouts = evaluator.rollouts
     return result
+
+
+#: The check particles' draw is fixed (not the planning seed): a plan's robustness should not
+#: depend on which seed found it.
+CHECK_SEED = 7
+
+
+def check_belief(task: Task, particles: tuple[Particle, ...]) -> Belief | None:
+    """The check particles of robust acceptance: each planning particle at friction
+    x(1 - f) and x(1 + f), f = ``planner.check_friction`` (None when 0)."""
+    params = task.spec.planner
+    f = params.check_friction
+    if f == 0:
+        return None
+    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0 and k != "friction"}
+    drawn = random_offsets(bounds, params.check_random, seed=CHECK_SEED)
+    check = [
+        make_particle(task, {**o, "friction": sign * f})
+        for sign in (-1.0, 1.0)
+        for o in [*(p.offsets for p in particles), *drawn]
+    ] + [make_particle(task, o) for o in drawn]
+    return start_belief(task, check)
 
 
 def contact_search(

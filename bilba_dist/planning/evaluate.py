@@ -5,6 +5,13 @@ contact there is it run on the others. Candidates go in chunks, and the search s
 first motion that brings every particle into the contact (paper: "if any of the motions ...
 achieve the current desired contact for every particle") or, with a patience, once that many
 candidates in a row have not raised the best score.
+
+Robust acceptance: a belief may carry check particles (``Belief.check``: the planning
+particles again at other frictions, planning/bilba.py). A motion that brings every planning
+particle into the contact is then also simulated on them, and wins only if it brings them
+all in too; one that does not is kept as a candidate (ranked by how many it brought), so the
+search goes on; MakeContact counts the check particles it brought as progress, and needs
+them all in before the contact is made.
 """
 
 from collections.abc import Callable, Sequence
@@ -28,6 +35,11 @@ class Scored:
     score: float
     count: int
     posterior: Belief | None  # None: it failed its own particle and the rest were skipped
+    checked: int = -1  # check particles it brought into the contact (-1: not simulated)
+
+    def rank(self) -> tuple[int, int, float]:
+        """Particles in, then check particles in, then the score (its tie-break)."""
+        return self.count, self.checked, self.score
 
 
 @dataclass
@@ -76,13 +88,58 @@ class Evaluator:
                     on_scored(s)
             scored += chunk_scored
             winners = [s for s in chunk_scored if s.count == len(belief)]
+            if winners and belief.check is not None:
+                winners = self._checked(belief, winners, accept)
+                scored = [*scored[: -len(chunk_scored)], *self._merge(chunk_scored, winners)]
+                winners = [s for s in winners if s.checked == len(belief.check)]
             if winners:
-                return scored, max(winners, key=lambda s: s.score)
+                return scored, max(winners, key=Scored.rank)
             top = max(s.score for s in chunk_scored)
             best, idle = (top, 0) if top > best else (best, idle + len(batch))
             if patience and idle >= patience:
                 break
         return scored, None
+
+    def _checked(self, belief: Belief, winners: list[Scored], accept: Accept) -> list[Scored]:
+        """``winners`` with their check particles simulated, in one batch."""
+        check = belief.check
+        assert check is not None
+        requests = [
+            RolloutRequest(p, st, s.candidate.motion)
+            for s in winners
+            for p, st in zip(check.particles, check.states, strict=True)
+        ]
+        results = self.simulate(requests)
+        n, out = len(check), []
+        for k, s in enumerate(winners):
+            after = check.after(results[k * n : (k + 1) * n])
+            assert s.posterior is not None
+            out.append(
+                Scored(
+                    s.candidate,
+                    s.score,
+                    s.count,
+                    s.posterior.with_check(after),
+                    after.count(accept),
+                )
+            )
+        return out
+
+    @staticmethod
+    def _merge(chunk: list[Scored], checked: list[Scored]) -> list[Scored]:
+        by_candidate = {id(s.candidate): s for s in checked}
+        return [by_candidate.get(id(s.candidate), s) for s in chunk]
+
+    def advance_check(self, belief: Belief, best: Scored) -> Belief:
+        """``best``'s posterior with the check particles moved by its motion too (simulated
+        now when they were not yet)."""
+        assert best.posterior is not None
+        if belief.check is None or best.posterior.check is not None:
+            return best.posterior
+        check = belief.check
+        motion = best.candidate.motion
+        results = self.simulate(_requests(check, [(i, motion) for i in range(len(check))]))
+        return best.posterior.with_check(check.after(results))
 
     def _screen(self, belief: Belief, batch: Sequence[Candidate]) -> list[RolloutRequest]:
         """The screening requests of ``batch`` (each candidate on its own particle)."""
@@ -136,4 +193,4 @@ def _requests(belief: Belief, pairs: Sequence[tuple[int, Motion]]) -> list[Rollo
 
 def best_of(scored: Sequence[Scored]) -> Scored | None:
     full = [s for s in scored if s.posterior is not None]
-    return max(full, key=lambda s: s.score) if full else None
+    return max(full, key=Scored.rank) if full else None

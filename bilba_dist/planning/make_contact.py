@@ -83,14 +83,16 @@ def make_contact(
     and those after it in the schedule); fail when a motion no longer adds a particle."""
     steps: list[Step] = []
     for _ in range(search.max_motions):
-        before = belief.count(accept)
+        before = _progress(belief, accept)
         best = best_motion(search, belief, mode, accept, rng)
-        if best is None or best.posterior is None or best.count <= before:
-            reason = f"no motion brought more particles into {mode} ({before}/{len(belief)})"
-            return ContactOutcome(False, steps, belief, reason, before)
+        if best is None or best.posterior is None or best.count < before[0]:
+            return _failed(steps, mode, belief, accept)
+        posterior = search.evaluator.advance_check(belief, best)
+        if _progress(posterior, accept) <= before:
+            return _failed(steps, mode, belief, accept)
         steps.append(_accept(search, mode, belief, best))
-        belief = best.posterior
-        if best.count == len(belief):
+        belief = posterior
+        if _progress(belief, accept) == _all(belief):
             return ContactOutcome(True, steps, belief)
     return ContactOutcome(
         False,
@@ -99,6 +101,26 @@ def make_contact(
         f"{search.max_motions} motions did not reach {mode}",
         belief.count(accept),
     )
+
+
+def _progress(belief: Belief, accept: Accept) -> tuple[int, int]:
+    """Particles in ``accept``, then check particles in it."""
+    return belief.count(accept), belief.check.count(accept) if belief.check is not None else 0
+
+
+def _all(belief: Belief) -> tuple[int, int]:
+    return len(belief), len(belief.check) if belief.check is not None else 0
+
+
+def _failed(steps: list[Step], mode: ContactPair, belief: Belief, accept: Accept) -> ContactOutcome:
+    count, checked = _progress(belief, accept)
+    reason = f"no motion brought more particles into {mode} ({count}/{len(belief)})"
+    if count == len(belief) and belief.check is not None:
+        reason = (
+            f"no motion brought more check particles into {mode} ({checked}/{len(belief.check)} "
+            f"at other frictions; planner.check_friction)"
+        )
+    return ContactOutcome(False, steps, belief, reason, count)
 
 
 def race(

@@ -14,7 +14,9 @@ from pydantic import AfterValidator, BeforeValidator
 
 LENGTH_UNITS = {"m": 1.0, "cm": 1e-2, "mm": 1e-3}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180.0}
-_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z]*)\s*$")
+#: A relative spread: "50%" or 0.5.
+FRACTION_UNITS = {"%": 0.01}
+_QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-zA-Z%]*)\s*$")
 
 
 def parse_quantity(value: object, units: dict[str, float], kind: str) -> float:
@@ -61,6 +63,10 @@ def parse_length(value: object) -> float:
 
 def parse_angle(value: object) -> float:
     return parse_quantity(value, ANGLE_UNITS, "angle")
+
+
+def parse_fraction(value: object) -> float:
+    return parse_quantity(value, FRACTION_UNITS, "fraction")
 
 
 Length = Annotated[

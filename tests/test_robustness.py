@@ -1,0 +1,172 @@
+"""Plans beyond their particles: friction and mass as belief axes, robust acceptance, and
+`bilba validate --map`."""
+
+import csv
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from bilba_dist.belief.particles import initial_belief, make_particle
+from bilba_dist.belief.start import start_belief
+from bilba_dist.planning.bilba import check_belief, plan
+from bilba_dist.plans.replay import replay
+from bilba_dist.rollout import Motion
+from bilba_dist.task.loader import build_task, load_task, with_planner
+from bilba_dist.workers.rollout_worker import RolloutWorker
+from tests.test_task_files import run_cli
+
+
+def test_friction_and_mass_are_axes_of_the_belief():
+    task = load_task("peg-in-hole", ["grasp.x=1cm", "friction=50%", "mass=20%"])
+    assert task.spec.uncertainty == pytest.approx({"grasp.x": 0.01, "friction": 0.5, "mass": 0.2})
+    scales = sorted((p.friction_scale, p.mass_scale) for p in initial_belief(task))
+    expected = [(0.5, 1), (1, 0.8), (1, 1), (1, 1), (1, 1), (1, 1.2), (1.5, 1)]
+    assert np.allclose(scales, expected)
+    hot = make_particle(task, {"friction": 0.5})
+    assert hot.X_GM.isApprox(task.X_GM) and hot.X_WO.isApprox(task.X_WO)  # no pose change
+
+
+@pytest.mark.parametrize(
+    ("bound", "fragment"),
+    [
+        ("friction=150%", "friction: 150 % is outside ±90 %"),
+        ("friction=-10%", "bounds must be >= 0: friction"),
+        ("mass=2cm", "unit 'cm' is not a fraction unit"),
+        ("grip.friction=5%", "unknown uncertainty axis 'grip.friction'"),
+        ("friction=nan", "cannot read 'nan' as a fraction"),
+    ],
+)
+def test_a_bad_physical_bound_is_one_line(bound, fragment):
+    result = run_cli("graph", "peg-in-hole", "-u", bound)
+    assert result.exit_code == 2, result.output
+    assert fragment in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.fixture(scope="module")
+def slide():
+    """A motion that slides the peg across the hole's top (pressed down, pulled along x)."""
+    task = load_task("peg-in-hole", ["friction=50%"])
+    G_d = task.X_WG0 * pin.SE3(np.eye(3), np.array([0.05, 0.0, 0.0]))
+    G_d = pin.SE3(G_d.rotation, G_d.translation - np.array([0.0, 0.0, 0.05]))
+    return task, Motion(np.diag([60.0, 60, 60, 400, 400, 400]), G_d, 3.0)
+
+
+def test_a_particles_friction_is_the_tasks_friction_scaled(slide):
+    """A particle at friction +50 % ends exactly where the nominal particle of a task with
+    1.5 μ ends, and elsewhere than at nominal friction."""
+    task, motion = slide
+    hot = make_particle(task, {"friction": 0.5})
+    worker = RolloutWorker(task)
+    (by_particle,) = replay(task, [_planned(motion)], [hot], worker).states
+    (nominal,) = replay(task, [_planned(motion)], [make_particle(task, {})], worker).states
+    scaled = build_task(task.spec.model_copy(update={"friction": task.spec.friction * 1.5}), "")
+    (by_task,) = replay(scaled, [_planned(motion)], [make_particle(scaled, {})],
+                        RolloutWorker(scaled)).states  # fmt: skip
+    assert np.allclose(by_particle.X_WM.translation, by_task.X_WM.translation, atol=1e-9)
+    assert np.linalg.norm(by_particle.X_WM.translation - nominal.X_WM.translation) > 1e-4
+
+
+def test_a_particles_mass_moves_the_part_but_not_the_controllers_model(slide):
+    task, motion = slide
+    heavy = make_particle(task, {"mass": 0.8})
+    worker = RolloutWorker(task)
+    (light,) = replay(task, [_planned(motion)], [make_particle(task, {})], worker).states
+    (loaded,) = replay(task, [_planned(motion)], [heavy], worker).states
+    assert np.linalg.norm(loaded.q - light.q) > 1e-5  # gravity compensation is for 1x
+
+
+def _planned(motion: Motion):
+    from bilba_dist.geometry.contact import ContactPair
+    from bilba_dist.planning.result import PlannedMotion
+
+    free = ContactPair("free", "free")
+    return PlannedMotion(motion.K, motion.G_d, np.zeros(7), motion.timeout_s, free, 0.0)
+
+
+def test_robust_acceptance_brings_every_check_particle_home():
+    """With check_friction the plan's own check particles — the planning particles at
+    ×0.5 and ×1.5 friction and 2 drawn inside the bounds — reach the goal when the plan is
+    replayed on them from the start (what the planner believed of them is what happens)."""
+    task = with_planner(
+        load_task("peg-in-hole", ["grasp.pitch=2deg"]), check_friction=0.5, check_random=2
+    )
+    worker = RolloutWorker(task)
+    result = plan(task, worker, "bilba-fixed", seed=0)
+    assert result.success, result.reason
+    check = check_belief(task, initial_belief(task))
+    assert check is not None and len(check) == 2 * 3 + 3 * 2
+    assert result.final_belief is not None and result.final_belief.check is not None
+    assert result.final_belief.check.count(frozenset([task.goal])) == len(check)
+    final = replay(task, result.motions, check.particles, worker)
+    assert all(task.goal in c for c in final.contacts)
+    off = with_planner(task, check_friction=0.0)
+    assert check_belief(off, initial_belief(off)) is None
+    assert start_belief(off, initial_belief(off)).check is None
+
+
+@pytest.fixture(scope="module")
+def default_plan(tmp_path_factory):
+    out = tmp_path_factory.mktemp("plan") / "peg.json"
+    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_validate_maps_success_over_two_axes(default_plan, tmp_path):
+    prefix = tmp_path / "map"
+    args = ["--map", "grasp.x=2cm", "--map", "friction=50%", "--points", "5"]
+    result = run_cli(
+        "validate", str(default_plan), "--workers", "0", *args, "--map-out", str(prefix)
+    )
+    assert result.exit_code == 0, result.output
+    rows = list(csv.DictReader((tmp_path / "map.csv").open()))
+    assert len(rows) == 25 and set(rows[0]) == {"grasp.x", "friction", "success"}
+    at = {(float(r["grasp.x"]), float(r["friction"])): int(r["success"]) for r in rows}
+    assert at[(0.0, 0.0)] == 1  # the nominal particle: the plan works there
+    assert at[(0.02, 0.0)] == 0 and at[(-0.02, 0.0)] == 0  # 2 cm off in x: no pitch plan does
+    assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    fraction = sum(at.values()) / 25
+    assert (
+        f"map:             {fraction:.3f} of 25 over grasp.x ±2cm x friction ±50%" in result.output
+    )
+
+
+@pytest.mark.parametrize(
+    ("maps", "fragment"),
+    [
+        (["grasp.x=1cm", "env.y=1cm", "friction=5%"], "one or two axes"),
+        (["grasp.x=1cm", "grasp.x=2cm"], "given twice"),
+        (["grasp.x=0cm"], "bounds must be > 0"),
+        (["speed=3"], "unknown uncertainty axis 'speed'"),
+        (["grasp.x"], "write AXIS=BOUND"),
+    ],
+)
+def test_a_bad_map_is_one_line(default_plan, maps, fragment):
+    args = [a for m in maps for a in ("--map", m)]
+    result = run_cli("validate", str(default_plan), "--workers", "0", *args)
+    assert result.exit_code == 2 and fragment in result.stderr, result.output
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan):
+    """The default plan's first motion wins its contact on the planning belief; with a
+    check particle it cannot bring along (the environment 5 cm off) it is scored, its check
+    simulated, and not returned as the winner."""
+    from bilba_dist.planning.evaluate import Candidate, Evaluator
+    from bilba_dist.plans.file import read_plan
+
+    plan_file = read_plan(default_plan)
+    task = plan_file.task()
+    first = plan_file.motions[0]
+    accept = frozenset(m.contact for m in plan_file.motions)
+    evaluator = Evaluator(RolloutWorker(task))
+    belief = start_belief(task, initial_belief(task))
+    candidate = Candidate(Motion(first.K, first.G_d, first.timeout_s), 0)
+    _, winner = evaluator.score(belief, [candidate], accept)
+    assert winner is not None and winner.checked == -1
+    far = start_belief(task, [make_particle(task, {"env.y": 0.05})])
+    scored, winner = evaluator.score(belief.with_check(far), [candidate], accept)
+    assert winner is None
+    assert scored[0].count == len(belief) and scored[0].checked == 0
+    assert scored[0].posterior is not None and scored[0].posterior.check is not None
