@@ -33,3 +33,14 @@ def write_task(tmp_path: Path, data: dict | str, name: str = "task.yaml") -> Pat
     path = tmp_path / name
     path.write_text(data if isinstance(data, str) else yaml.safe_dump(data, sort_keys=False))
     return path
+
+
+@pytest.fixture(scope="session")
+def default_plan_file(tmp_path_factory) -> Path:
+    """A plan of the default task, planned in-process with `bilba plan`, as a file."""
+    from tests.test_task_files import run_cli
+
+    out = tmp_path_factory.mktemp("plan") / "peg.json"
+    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    return out

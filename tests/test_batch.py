@@ -74,11 +74,19 @@ def test_a_batch_without_workers_or_a_report_without_records_is_one_line_and_exi
     assert len(result.stderr.strip().splitlines()) == 1
 
 
-def test_the_paper_grid_expands_to_30_distinct_jobs():
+def test_the_paper_grids_cover_its_whole_table():
+    """Table 1: 8 peg settings × 2 BILBA variants × 5 seeds, B-EST on the same 8, 4 puzzle."""
+    settings = {"pitch1", "pitch2", "pitch3", "pitch4", "x1", "x2", "y1", "y2"}
+    expected = {"paper": (80, settings), "paper-best": (24, settings)}
+    expected["paper-puzzle"] = (40, {"pitch1", "pitch2", "x1", "y1"})
+    for name, (count, names) in expected.items():
+        batch = load_jobs(ROOT / "deploy" / "jobs" / f"{name}.yaml")
+        assert len(batch.jobs) == count and len({j.id for j in batch.jobs}) == count
+        assert {j.setting for j in batch.jobs} == names
     batch = load_jobs(ROOT / "deploy" / "jobs" / "paper.yaml")
-    assert len(batch.jobs) == 30 and len({j.id for j in batch.jobs}) == 30
-    assert {j.setting for j in batch.jobs} == {"pitch", "x", "y"}
-    assert batch.spec(batch.jobs[0]).uncertainty == pytest.approx({"grasp.pitch": 0.0349066}, 1e-5)
+    by_setting = {j.setting: batch.spec(j).uncertainty for j in batch.jobs}
+    assert by_setting["pitch4"] == pytest.approx({"grasp.pitch": 0.0698132}, 1e-5)
+    assert by_setting["y2"] == pytest.approx({"env.y": 0.02})
 
 
 @pytest.fixture(scope="module")

@@ -65,3 +65,33 @@ def test_batch_speedup_compares_the_time_with_a_batch_in_flight(monkeypatch):
     # 9 s of batches on one actor, 5 s on two; the serial second is the same on both.
     assert batch_speedup({"wall": 10.0, "serial": 1.0}, {"wall": 6.0, "serial": 1.0}) == 1.8
     assert batch_speedup({"wall": 10.0, "serial": 4.0}, {"wall": 7.0, "serial": 4.0}) == 2.0
+
+
+def test_table1_puts_our_medians_beside_the_papers_with_the_ratio_to_best(tmp_path):
+    """Records of a small made-up batch: medians over successes, a B-EST timeout counted at
+    its timeout (the ratio then an upper bound), cells not run said so."""
+    import json
+
+    def record(planner, seed, status, time_s):
+        return {"task": "peg-in-hole", "setting": "x1", "planner": planner, "seed": seed,
+                "status": status, "planning_time_s": time_s, "rollouts": 10,
+                "timeout_s": 600.0}  # fmt: skip
+
+    rows = [record("bilba-variable", s, "success", t) for s, t in enumerate([2.0, 4.0, 9.0])]
+    rows += [record("bilba-fixed", 0, "success", 3.0), record("bilba-fixed", 1, "timeout", 900)]
+    rows += [record("b-est", 0, "success", 100.0), record("b-est", 1, "timeout", 650.0)]
+    (tmp_path / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "table1.py"), str(tmp_path)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    line = next(x for x in run.stdout.splitlines() if x.startswith("| peg-in-hole | x1 |"))
+    # B-EST: median of 100 and the 600 s timeout = 350; BILBA's faster median 3.0
+    assert line == (
+        "| peg-in-hole | x1 | 4.0 ± 2.0 (3/3) | 3.0 ± 0.0 (1/2) | 100.0 ± 0.0 (1/2) "
+        f"| 20.1 / 21.1 / 187.0 | ≤ {3.0 / 350.0:.3f} |"
+    )
+    assert "| puzzle | x1 | not run | not run | not run |" in run.stdout
+    summary = json.loads(run.stdout.strip().splitlines()[-1])
+    assert summary["cells"]["peg-in-hole/x1"]["bilba-variable"] == 4.0

@@ -105,19 +105,11 @@ def test_robust_acceptance_brings_every_check_particle_home():
     assert start_belief(off, initial_belief(off)).check is None
 
 
-@pytest.fixture(scope="module")
-def default_plan(tmp_path_factory):
-    out = tmp_path_factory.mktemp("plan") / "peg.json"
-    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
-    assert result.exit_code == 0, result.output
-    return out
-
-
-def test_validate_maps_success_over_two_axes(default_plan, tmp_path):
+def test_validate_maps_success_over_two_axes(default_plan_file, tmp_path):
     prefix = tmp_path / "map"
     args = ["--map", "grasp.x=2cm", "--map", "friction=50%", "--points", "5"]
     result = run_cli(
-        "validate", str(default_plan), "--workers", "0", *args, "--map-out", str(prefix)
+        "validate", str(default_plan_file), "--workers", "0", *args, "--map-out", str(prefix)
     )
     assert result.exit_code == 0, result.output
     rows = list(csv.DictReader((tmp_path / "map.csv").open()))
@@ -139,24 +131,24 @@ def test_validate_maps_success_over_two_axes(default_plan, tmp_path):
         (["grasp.x=1cm", "grasp.x=2cm"], "given twice"),
         (["grasp.x=0cm"], "bounds must be > 0"),
         (["speed=3"], "unknown uncertainty axis 'speed'"),
-        (["grasp.x"], "write AXIS=BOUND"),
+        (["grasp.x"], "write AXIS=VALUE"),
     ],
 )
-def test_a_bad_map_is_one_line(default_plan, maps, fragment):
+def test_a_bad_map_is_one_line(default_plan_file, maps, fragment):
     args = [a for m in maps for a in ("--map", m)]
-    result = run_cli("validate", str(default_plan), "--workers", "0", *args)
+    result = run_cli("validate", str(default_plan_file), "--workers", "0", *args)
     assert result.exit_code == 2 and fragment in result.stderr, result.output
     assert len(result.stderr.strip().splitlines()) == 1
 
 
-def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan):
+def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
     """The default plan's first motion wins its contact on the planning belief; with a
     check particle it cannot bring along (the environment 5 cm off) it is scored, its check
     simulated, and not returned as the winner."""
     from bilba_dist.planning.evaluate import Candidate, Evaluator
     from bilba_dist.plans.file import read_plan
 
-    plan_file = read_plan(default_plan)
+    plan_file = read_plan(default_plan_file)
     task = plan_file.task()
     first = plan_file.motions[0]
     accept = frozenset(m.contact for m in plan_file.motions)

@@ -9,8 +9,7 @@ from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import success_map, validate_plan
-from bilba_dist.task.loader import build_task
-from bilba_dist.task.schema import parse_axis_values
+from bilba_dist.task.loader import build_task, parse_axis_items
 
 
 @click.command("validate")
@@ -102,18 +101,7 @@ def map_bounds(maps: tuple[str, ...]) -> dict[str, float]:
     """``--map`` options as {axis: bound}: one or two distinct axes, bounds > 0."""
     if len(maps) > 2:
         raise BilbaError("--map: give one or two axes")
-    raw = {}
-    for item in maps:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise BilbaError(f"--map {item!r}: write AXIS=BOUND, e.g. grasp.x=2cm")
-        if key.strip() in raw:
-            raise BilbaError(f"--map: {key.strip()} given twice")
-        raw[key.strip()] = value.strip()
-    try:
-        bounds = parse_axis_values(raw, prefix="")
-    except ValueError as exc:
-        raise BilbaError(f"--map: {exc}") from None
+    bounds = parse_axis_items(maps, "--map", "grasp.x=2cm")
     bad = [k for k, v in bounds.items() if v <= 0]
     if bad:
         raise BilbaError(f"--map: bounds must be > 0: {', '.join(bad)}")

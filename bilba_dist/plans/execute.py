@@ -20,26 +20,15 @@ from bilba_dist.plans.export import Export
 from bilba_dist.plans.file import PlanFile
 from bilba_dist.plans.replay import run_motions
 from bilba_dist.rollout import RolloutBackend
-from bilba_dist.task.loader import Task
-from bilba_dist.task.schema import parse_axis_values
+from bilba_dist.task.loader import Task, parse_axis_items
 
 
 def parse_particle(text: str) -> dict[str, float]:
     """``"grasp.x=3mm env.y=-1mm"`` (or comma-separated) → signed offsets in SI units."""
-    raw = {}
-    for item in text.replace(",", " ").split():
-        key, sep, value = item.partition("=")
-        if not sep or not key or not value:
-            raise BilbaError(f"--particle {text!r}: write AXIS=VALUE, e.g. grasp.x=3mm")
-        if key in raw:
-            raise BilbaError(f"--particle {text!r}: {key} given twice")
-        raw[key] = value
-    if not raw:
+    items = text.replace(",", " ").split()
+    if not items:
         raise BilbaError("--particle: give at least one AXIS=VALUE, e.g. grasp.x=3mm")
-    try:
-        return parse_axis_values(raw, prefix="")
-    except ValueError as exc:
-        raise BilbaError(f"--particle {text!r}: {exc}") from None
+    return parse_axis_items(items, "--particle", "grasp.x=3mm")
 
 
 def particles_for(task: Task, extra: Sequence[dict[str, float]]) -> tuple[Particle, ...]:

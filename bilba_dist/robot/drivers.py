@@ -74,7 +74,8 @@ DRIVERS: dict[str, Driver] = {
     "panda-py": Driver(
         "panda-py",
         "panda-python",
-        "Panda (the pip wheel bundles libfranka 0.9); FR3 wheels are on the project's releases",
+        "Panda (the pip wheel bundles libfranka 0.9); builds for newer libfranka are on the "
+        "project's GitHub releases",
         "diagonal-base",
         (0.0, INF),
         (0.0, INF),

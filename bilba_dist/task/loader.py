@@ -101,18 +101,27 @@ def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Ta
         raise TaskError(f"{source}: {exc}") from None
 
 
-def parse_overrides(items: Iterable[str]) -> dict[str, float]:
-    """``["grasp.pitch=2deg", "env.y=1cm"]`` → bounds in SI units."""
+def parse_axis_items(items: Iterable[str], option: str, example: str) -> dict[str, float]:
+    """``AXIS=VALUE`` items of a command-line option → {axis: value} in SI units (signed);
+    a malformed item, an axis given twice, an unknown axis or a bad value is one TaskError
+    line naming ``option``."""
     raw: dict[str, Any] = {}
     for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            raise TaskError(f"--uncertainty {item!r}: write AXIS=VALUE, e.g. grasp.pitch=2deg")
-        raw[key.strip()] = value.strip()
+        key, sep, value = (part.strip() for part in item.partition("="))
+        if not sep or not key or not value:
+            raise TaskError(f"{option} {item!r}: write AXIS=VALUE, e.g. {example}")
+        if key in raw:
+            raise TaskError(f"{option}: {key} given twice")
+        raw[key] = value
     try:
-        bounds = parse_axis_values(raw, prefix="")
+        return parse_axis_values(raw, prefix="")
     except ValueError as exc:
-        raise TaskError(f"--uncertainty: {exc}") from None
+        raise TaskError(f"{option}: {exc}") from None
+
+
+def parse_overrides(items: Iterable[str]) -> dict[str, float]:
+    """``["grasp.pitch=2deg", "env.y=1cm"]`` → bounds in SI units."""
+    bounds = parse_axis_items(items, "--uncertainty", "grasp.pitch=2deg")
     negative = [key for key, value in bounds.items() if value < 0]
     if negative:
         raise TaskError(f"--uncertainty: bounds must be >= 0: {', '.join(negative)}")
