@@ -330,3 +330,18 @@ def test_bad_input_to_execute_and_export_is_one_line(default_plan_file, args, fr
     assert result.exit_code == 2, result.output
     assert "Traceback" not in result.output and fragment in result.output
     assert len(result.output.strip().splitlines()) == 1 or "Usage:" in result.output
+
+
+def test_a_plan_from_before_a_new_setting_still_reads(default_plan_file, tmp_path):
+    """The embedded task's hash is of the task as stored: a file whose planner section
+    lacks a setting a later bilba added (here `check_random`) reads, and executes."""
+    import hashlib
+
+    document = json.loads(default_plan_file.read_text())
+    spec = document["task"]["spec"]
+    del spec["planner"]["check_random"]
+    document["task"]["hash"] = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+    older = tmp_path / "older.json"
+    older.write_text(json.dumps(document))
+    result = run_cli("execute", str(older))
+    assert result.exit_code == 0, result.output

@@ -251,17 +251,17 @@ def _check_damping(document: dict[str, Any], motions: list[PlannedMotion], path:
 
 def _check_task(document: dict[str, Any], path: Path) -> None:
     """The embedded task must validate and match its hash (an edited task would execute
-    a plan on parts it was not made for)."""
+    a plan on parts it was not made for). The hash is of the task as stored, so a file
+    written before a newer bilba added a setting (with a default) still reads."""
     task = document["task"]
     try:
-        spec = TaskSpec.model_validate(task["spec"])
+        TaskSpec.model_validate(task["spec"])
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
-        raise BilbaError(
-            f"{path}: malformed plan file: task.spec.{where}: {first['msg']}"
-        ) from None
-    canonical = json.dumps(spec.model_dump(mode="json"), sort_keys=True)
+        message = f"task.spec.{where}: {first['msg']}"
+        raise BilbaError(f"{path}: malformed plan file: {message}") from None
+    canonical = json.dumps(task["spec"], sort_keys=True)
     if hashlib.sha256(canonical.encode()).hexdigest() != task["hash"]:
         raise BilbaError(f"{path}: the embedded task does not match its hash (edited?)")
 
