@@ -162,3 +162,23 @@ def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
     assert winner is None
     assert scored[0].count == len(belief) and scored[0].checked == 0
     assert scored[0].posterior is not None and scored[0].posterior.check is not None
+
+
+def test_a_heavy_particle_leaves_the_world_as_it_found_it(slide):
+    """Particles' physics are set on the shared world only when they change, the part's
+    inertia scaled with its mass (PyBullet, given a mass alone, recomputes the inertia from
+    the collision shape): a nominal rollout after a heavy, slippery one is bit-identical to
+    one before it, and the part's inertia is the URDF's again."""
+    import pybullet as p
+
+    task, motion = slide
+    worker = RolloutWorker(task)
+    nominal, heavy = make_particle(task, {}), make_particle(task, {"mass": 0.8, "friction": -0.5})
+    sim = worker.panda_sim(nominal.X_GM)  # the world, before any rollout
+    inertia = p.getDynamicsInfo(sim.robot, sim.part_link, physicsClientId=sim.client)[2]
+    (first,) = replay(task, [_planned(motion)], [nominal], worker).states
+    replay(task, [_planned(motion)], [heavy], worker)
+    (again,) = replay(task, [_planned(motion)], [nominal], worker).states
+    assert np.array_equal(first.q, again.q) and np.array_equal(first.dq, again.dq)
+    after = p.getDynamicsInfo(sim.robot, sim.part_link, physicsClientId=sim.client)
+    assert after[2] == inertia and after[0] == pytest.approx(task.spec.manipuland.mass)

@@ -82,6 +82,7 @@ class FloatingSim:
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
+        self.friction = 1.0  # the friction factor in force
 
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
@@ -90,7 +91,9 @@ class FloatingSim:
         """``friction``: the particle's scale factor (the floating model's mass is the
         hand's virtual mass, so a mass axis does not act on it)."""
         p.restoreState(self.clean, physicsClientId=self.client)
-        self.env.set_friction(self.task.spec.friction * friction)
+        if friction != self.friction:  # dynamics parameters outlive restoreState
+            self.env.set_friction(self.task.spec.friction * friction)
+            self.friction = friction
         self.env.forget_contacts()
         self.env.place(X_WO)
         p.resetBasePositionAndOrientation(

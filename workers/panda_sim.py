@@ -96,25 +96,36 @@ class PandaSim:
         self.model = PandaModel(mass, X_GM, task.manipuland.centre())
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
+        info = p.getDynamicsInfo(self.robot, self.part_link, physicsClientId=self.client)
+        self.inertia = tuple(info[2])  # the part's local inertia diagonal, from the URDF
+        self.physics = (1.0, 1.0)  # friction and mass factors in force
 
     def close(self) -> None:
         p.disconnect(physicsClientId=self.client)
 
-    def reset(
-        self, X_WO: pin.SE3, q: np.ndarray, dq: np.ndarray, physics: tuple[float, float]
-    ) -> None:
-        """Put the world in a known state: no history carries over between rollouts.
-        ``physics``: the particle's friction and mass scale factors, set every time (the
-        controller's model keeps the nominal payload: the robot does not know the mass)."""
-        p.restoreState(self.clean, physicsClientId=self.client)
-        friction, mass = physics
+    def _set_physics(self, friction: float, mass: float) -> None:
+        """The particle's friction and mass factors. The part's inertia is scaled with its
+        mass explicitly: given a mass alone, PyBullet recomputes a link's inertia from its
+        collision shape, which changed every rollout's dynamics (and the puzzle's plans)."""
         self.env.set_friction(self.task.spec.friction * friction)
         p.changeDynamics(
             self.robot,
             self.part_link,
             mass=self.task.spec.manipuland.mass * mass,
+            localInertiaDiagonal=(np.array(self.inertia) * mass).tolist(),
             physicsClientId=self.client,
         )
+        self.physics = (friction, mass)
+
+    def reset(
+        self, X_WO: pin.SE3, q: np.ndarray, dq: np.ndarray, physics: tuple[float, float]
+    ) -> None:
+        """Put the world in a known state: no history carries over between rollouts.
+        ``physics``: the particle's friction and mass scale factors, set when they change (the
+        controller's model keeps the nominal payload: the robot does not know the mass)."""
+        p.restoreState(self.clean, physicsClientId=self.client)
+        if physics != self.physics:  # dynamics parameters outlive restoreState
+            self._set_physics(*physics)
         self.env.forget_contacts()
         self.env.place(X_WO)
         for j, qi, dqi in zip(self.joints, q, dq, strict=True):
