@@ -252,13 +252,13 @@ class PlannerParams(Strict):
     # Robust acceptance (ours; 0, the default, is off, as the authors'): a contact is made
     # only when every planning particle is in it and also every check particle — the
     # planning particles at friction x(1 - f) and x(1 + f), simulated from their own states
-    # through the plan. Plans then hold at frictions they were not planned on, at 1.4-20x
+    # through the plan. Plans then hold at frictions they were not planned on, at 1.7-18x
     # the planning time on the peg's translational settings (docs/planner.md, Robust
     # acceptance), which is why it is not on by default.
     check_friction: float = Field(default=0.0, ge=0, le=0.9)
     # ... and on this many more check particles drawn inside the pose bounds (a fixed draw),
     # each at friction x(1 - f), x1 and x(1 + f) (0: the planning particles' two frictions
-    # only, which held as well on the peg at a third to a half of the time).
+    # only, which held as well on the peg in a third to a half of the time).
     check_random: int = Field(default=0, ge=0, le=64)
     # Plan within one Franka driver's form of stiffness and its limits (docs/drivers.md):
     # every candidate K is made what that driver can hold before it is simulated, so the plan
