@@ -115,5 +115,9 @@ def report(folder: Path, png: Path | None = None) -> tuple[str, Path]:
         raise BilbaError(f"{folder / RECORDS}: no job records yet")
     table = cells(records)
     png = png or folder / "report.png"
-    plot(table, png)
+    try:
+        png.parent.mkdir(parents=True, exist_ok=True)
+        plot(table, png)
+    except OSError as exc:
+        raise BilbaError(f"{png}: cannot write the figure: {exc.strerror or exc}") from None
     return format_table(table), png

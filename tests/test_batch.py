@@ -142,6 +142,11 @@ def test_report_prints_the_table_and_writes_a_png(smoke_batch, tmp_path):
     assert png.read_bytes()[:4] == b"\x89PNG"
     missing = run("report", str(tmp_path / "nothing"))
     assert missing.exit_code == 2 and "no records.jsonl" in missing.stderr
+    nested = tmp_path / "new" / "folder" / "r.png"  # its folders are made
+    assert run("report", str(out), "--png", str(nested)).exit_code == 0 and nested.exists()
+    (tmp_path / "file").write_text("")
+    blocked = run("report", str(out), "--png", str(tmp_path / "file" / "r.png"))
+    assert blocked.exit_code == 2 and "cannot write the figure" in blocked.stderr
 
 
 def test_a_job_that_runs_out_of_time_is_recorded_as_a_timeout(tmp_path):
