@@ -30,7 +30,7 @@ FRICTIONS = (0.5, 1.0, 1.5)
 def run(job: tuple[str, str, int, float, int, float]) -> dict:
     from bilba_dist.planning.bilba import plan
     from bilba_dist.plans.replay import validate_plan
-    from bilba_dist.task.loader import build_task, load_task, with_planner
+    from bilba_dist.task.loader import load_task, with_friction, with_planner
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
     setting, variant, seed, check, check_random, timeout = job
@@ -51,8 +51,7 @@ def run(job: tuple[str, str, int, float, int, float]) -> dict:
         "rollouts": result.rollouts,
     }
     for scale in FRICTIONS:
-        spec = task.spec.model_copy(update={"friction": task.spec.friction * scale})
-        scaled = build_task(spec, task.source)
+        scaled = with_friction(task, scale)
         held = validate_plan(scaled, result.motions, RolloutWorker(scaled), 14, seed=1)
         row[f"x{scale:g}"] = round(held.held_out or 0.0, 3) if result.success else None
     return row

@@ -24,7 +24,7 @@ from pathlib import Path
 def check(job: tuple[str, list[float], int]) -> dict:
     from bilba_dist.plans.file import read_plan
     from bilba_dist.plans.replay import validate_plan
-    from bilba_dist.task.loader import build_task
+    from bilba_dist.task.loader import with_friction
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
     path, frictions, held_out = job
@@ -32,8 +32,7 @@ def check(job: tuple[str, list[float], int]) -> dict:
     task = plan.task()
     row: dict = {"plan": Path(path).stem}
     for scale in frictions:
-        spec = task.spec.model_copy(update={"friction": task.spec.friction * scale})
-        scaled = build_task(spec, task.source)
+        scaled = with_friction(task, scale)
         worker = RolloutWorker(scaled)
         result = validate_plan(scaled, plan.motions, worker, held_out, seed=1)
         worker.close()

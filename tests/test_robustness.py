@@ -12,7 +12,7 @@ from bilba_dist.belief.start import start_belief
 from bilba_dist.planning.bilba import check_belief, plan
 from bilba_dist.plans.replay import replay
 from bilba_dist.rollout import Motion
-from bilba_dist.task.loader import build_task, load_task, with_planner
+from bilba_dist.task.loader import load_task, with_friction, with_planner
 from bilba_dist.workers.rollout_worker import RolloutWorker
 from tests.test_task_files import run_cli
 
@@ -60,7 +60,7 @@ def test_a_particles_friction_is_the_tasks_friction_scaled(slide):
     worker = RolloutWorker(task)
     (by_particle,) = replay(task, [_planned(motion)], [hot], worker).states
     (nominal,) = replay(task, [_planned(motion)], [make_particle(task, {})], worker).states
-    scaled = build_task(task.spec.model_copy(update={"friction": task.spec.friction * 1.5}), "")
+    scaled = with_friction(task, 1.5)
     (by_task,) = replay(scaled, [_planned(motion)], [make_particle(scaled, {})],
                         RolloutWorker(scaled)).states  # fmt: skip
     assert np.allclose(by_particle.X_WM.translation, by_task.X_WM.translation, atol=1e-9)

@@ -9,7 +9,7 @@ from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import success_map, validate_plan
-from bilba_dist.task.loader import build_task, parse_axis_items
+from bilba_dist.task.loader import parse_axis_items, with_friction
 
 
 @click.command("validate")
@@ -66,8 +66,7 @@ def validate(
     plan = read_plan(plan_path)
     task = plan.task(task_name)
     if friction_scale != 1.0:
-        spec = task.spec.model_copy(update={"friction": task.spec.friction * friction_scale})
-        task = build_task(spec, task.source)
+        task = with_friction(task, friction_scale)
     from bilba_dist.schedulers.session import (
         rollout_backend,  # imports pybullet: after input checks
     )

@@ -163,6 +163,12 @@ def with_planner(task: Task, **changes: Any) -> Task:
     return build_task(task.spec.model_copy(update={"planner": planner}), task.source)
 
 
+def with_friction(task: Task, factor: float) -> Task:
+    """``task`` with its friction coefficient times ``factor`` (> 0)."""
+    spec = task.spec.model_copy(update={"friction": task.spec.friction * factor})
+    return build_task(spec, task.source)
+
+
 def with_preset(task: Task, preset: str) -> Task:
     """``task`` with a planner preset's fields (``paper``: the authors' settings; ``default``:
     ours) replacing the task file's values for those fields."""
