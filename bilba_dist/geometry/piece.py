@@ -182,11 +182,16 @@ class Part:
     def pieces_by_name(self) -> dict[str, ConvexPiece]:
         return {piece.name: piece for piece in self.pieces}
 
-    def centre(self) -> np.ndarray:
-        """Centre of the part's vertices' bounding box [m, part frame]: where the simulator
-        puts its mass (and the plan file its payload's centre of mass)."""
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The corners (min, max) of the part's vertices' bounding box [m, part frame]."""
         points = np.concatenate([p.vertices for p in self.pieces])
-        return (points.min(axis=0) + points.max(axis=0)) / 2
+        return points.min(axis=0), points.max(axis=0)
+
+    def centre(self) -> np.ndarray:
+        """Centre of the bounding box: where the simulator puts the part's mass (and the
+        plan file its payload's centre of mass)."""
+        low, high = self.bounds()
+        return (low + high) / 2
 
     @property
     def face_names(self) -> list[str]:

@@ -22,18 +22,7 @@ import pinocchio as pin
 
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import PlanFile
-from bilba_dist.robot.drivers import (
-    DRIVERS,
-    R_FLANGE_HAND,
-    Driver,
-    Fit,
-    fit,
-    hand_to_ee,
-    to_ee,
-    to_hand,
-)
-
-TARGETS = tuple(DRIVERS)
+from bilba_dist.robot.drivers import R_FLANGE_HAND, Driver, Fit, fit_hand, hand_to_ee
 
 
 @dataclass(frozen=True)
@@ -58,14 +47,11 @@ def driver_motions(plan: PlanFile, driver: Driver, offset: np.ndarray) -> Export
     warnings: list[str] = []
     motions = []
     for i, m in enumerate(plan.motions):
-        r = m.G_d.rotation @ offset
-        fitted = fit(to_ee(m.K, r), driver)
+        K_hand, fitted = fit_hand(m.K, m.G_d.rotation, driver, offset)
         warnings += [f"motion {i + 1}: {change}" for change in fitted.changes]
         contact = f"({m.contact.env}, {m.contact.manip})"
         motions.append(
-            DriverMotion(
-                hand_to_ee(m.G_d, offset), fitted, to_hand(fitted.K_ee, r), m.timeout_s, contact
-            )
+            DriverMotion(hand_to_ee(m.G_d, offset), fitted, K_hand, m.timeout_s, contact)
         )
     controller = plan.document.get("controller", {})
     if controller.get("wrench_clip") and not driver.wrench_clip:
@@ -93,8 +79,8 @@ def payload(plan: PlanFile) -> tuple[float, list[float], list[float]]:
         return 0.0, [0.0, 0.0, 0.0], [0.0] * 9
     task = plan.task()
     mass = float(doc["payload"]["mass_kg"])
-    points = np.concatenate([p.vertices for p in task.manipuland.pieces])
-    a, b, c = points.max(axis=0) - points.min(axis=0)
+    low, high = task.manipuland.bounds()
+    a, b, c = high - low
     I_M = mass / 12 * np.diag([b * b + c * c, a * a + c * c, a * a + b * b])
     R_FM = R_FLANGE_HAND @ task.X_GM.rotation
     com_F = R_FLANGE_HAND @ np.array(doc["payload"]["com_hand_m"], dtype=float)
