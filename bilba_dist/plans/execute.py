@@ -19,6 +19,7 @@ from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.plans.export import Export
 from bilba_dist.plans.file import PlanFile
 from bilba_dist.plans.replay import run_motions
+from bilba_dist.robot.drivers import DEFAULT_EE_OFFSET_M
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task, parse_axis_items
 
@@ -82,4 +83,4 @@ def ee_offset_of(plan: PlanFile, given: tuple[float, ...] | None) -> np.ndarray:
         values = list(given)
         return np.array([0.0, 0.0, values[0]] if len(values) == 1 else values, dtype=float)
     robot = plan.document.get("robot") or {}
-    return np.array(robot.get("ee_offset_m", [0.0, 0.0, 0.1034]), dtype=float)
+    return np.array(robot.get("ee_offset_m", [0.0, 0.0, DEFAULT_EE_OFFSET_M]), dtype=float)

@@ -54,8 +54,8 @@ def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
     from bilba_dist.belief.particles import initial_belief
     from bilba_dist.belief.start import start_state
 
-    nominal = next((p for p in initial_belief(task) if not any(p.offsets.values())), None)
-    nominal = nominal or initial_belief(task)[0]
+    particles = initial_belief(task)
+    nominal = next((p for p in particles if not any(p.offsets.values())), particles[0])
     settings, planner = SimSettings(), task.spec.planner
     return {
         "format": FORMAT,
@@ -145,10 +145,7 @@ def write_plan_text(text: str, path: Path) -> None:
 class PlanFile:
     document: dict[str, Any]
     motions: list[PlannedMotion]
-
-    @property
-    def version(self) -> int:
-        return int(self.document["version"])
+    spec: TaskSpec | None = None  # the embedded task, validated on reading (version 2)
 
     @property
     def task_name(self) -> str:
@@ -161,9 +158,8 @@ class PlanFile:
     def task(self, override: str | None = None) -> Task:
         """The plan's task: the one embedded (version 2), else the built-in or file of its
         name with its uncertainty; ``override`` (a name or file) replaces either."""
-        if override is None and self.version >= 2:
-            spec = TaskSpec.model_validate(self.document["task"]["spec"])
-            return build_task(spec, str(self.document["task"]["source"]))
+        if override is None and self.spec is not None:
+            return build_task(self.spec, str(self.document["task"]["source"]))
         overrides = [f"{k}={v}" for k, v in self.uncertainty.items()]
         return load_task(override or self.task_name, overrides)
 
@@ -216,10 +212,10 @@ def read_plan(path: Path) -> PlanFile:
         document["task"]["name"]
     except (KeyError, TypeError, ValueError, OverflowError) as exc:
         raise BilbaError(f"{path}: malformed plan file: {type(exc).__name__} {exc}") from None
-    if version == 2:
-        _check_damping(document, motions, path)
-        _check_task(document, path)
-    return PlanFile(document, motions)
+    if version == 1:
+        return PlanFile(document, motions)
+    _check_damping(document, motions, path)
+    return PlanFile(document, motions, _checked_task(document, path))
 
 
 @cache
@@ -249,13 +245,13 @@ def _check_damping(document: dict[str, Any], motions: list[PlannedMotion], path:
             raise BilbaError(f"{path}: malformed plan file: motions/{i}/D is not 2·sqrtm(K)")
 
 
-def _check_task(document: dict[str, Any], path: Path) -> None:
+def _checked_task(document: dict[str, Any], path: Path) -> TaskSpec:
     """The embedded task must validate and match its hash (an edited task would execute
     a plan on parts it was not made for). The hash is of the task as stored, so a file
     written before a newer bilba added a setting (with a default) still reads."""
     task = document["task"]
     try:
-        TaskSpec.model_validate(task["spec"])
+        spec = TaskSpec.model_validate(task["spec"])
     except ValidationError as exc:
         first = exc.errors()[0]
         where = ".".join(str(p) for p in first["loc"])
@@ -264,6 +260,7 @@ def _check_task(document: dict[str, Any], path: Path) -> None:
     canonical = json.dumps(task["spec"], sort_keys=True)
     if hashlib.sha256(canonical.encode()).hexdigest() != task["hash"]:
         raise BilbaError(f"{path}: the embedded task does not match its hash (edited?)")
+    return spec
 
 
 def _read_motion(m: dict[str, Any]) -> PlannedMotion:
