@@ -127,6 +127,7 @@ def execute(
     exported = None
     if driver is not None:
         exported = driver_motions(plan, DRIVERS[driver], ee_offset_of(plan, ee_offset))
+        task = with_planner(task, driver=driver)  # the worker simulates as it runs
     motions = driven_motions(plan, exported)
     belief_particles = particles_for(task, extra)
     click.echo(
@@ -136,8 +137,6 @@ def execute(
     )
     for warning in exported.warnings if exported else []:
         click.echo(f"driver     {warning}")
-    if driver is not None:
-        task = with_planner(task, driver=driver)  # the worker simulates as it runs
     backend = _backend(task, gui)
     final = None
     try:
