@@ -182,3 +182,29 @@ def test_a_heavy_particle_leaves_the_world_as_it_found_it(slide):
     assert np.array_equal(first.q, again.q) and np.array_equal(first.dq, again.dq)
     after = p.getDynamicsInfo(sim.robot, sim.part_link, physicsClientId=sim.client)
     assert after[2] == inertia and after[0] == pytest.approx(task.spec.manipuland.mass)
+
+
+def test_friction_axis_and_map_on_a_task_of_our_own(tmp_path):
+    """A hexagonal peg (2 mm clearance) planned with friction as a belief axis holds at its
+    friction particles, and its map over grasp.x × friction has the plan's particles green."""
+    import yaml
+
+    from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
+
+    path = tmp_path / "hexagon.yaml"
+    data = peg_in_hole_task("hexagon", [regular_polygon(6, 0.055)], 0.002, 0.005)
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "plan.json"
+    planned = run_cli("plan", str(path), "-u", "grasp.x=3mm friction=30%", "--workers", "0",
+                      "--no-log", "--out", str(out))  # fmt: skip
+    assert planned.exit_code == 0, planned.output
+    assert "planning belief: 1.000 of 5" in run_cli("validate", str(out), "--workers", "0").output
+    args = ["--map", "grasp.x=3mm", "--map", "friction=30%", "--points", "3"]
+    mapped = run_cli(
+        "validate", str(out), "--workers", "0", *args, "--map-out", str(tmp_path / "m")
+    )
+    rows = {(float(r["grasp.x"]), float(r["friction"])): int(r["success"])
+            for r in csv.DictReader((tmp_path / "m.csv").open())}  # fmt: skip
+    assert mapped.exit_code == 0 and len(rows) == 9
+    for corner in [(0.0, 0.0), (0.003, 0.0), (-0.003, 0.0), (0.0, 0.3), (0.0, -0.3)]:
+        assert rows[corner] == 1, corner  # the plan's own particles lie on the grid
