@@ -15,6 +15,7 @@ from bilba_dist.cli.main import cli, register
 from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.bilba import furthest_common, plan
+from bilba_dist.planning.recorder import NullRecorder
 from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
@@ -355,11 +356,10 @@ def test_race_finds_a_first_contact_that_holds_a_spread_belief():
     no motion makes for all three particles at once; the race follows a chamfer along it."""
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     worker = RolloutWorker(task, "panda")
-    schedules, won, rollouts = _first_contact(task, worker, 0, 3)
+    schedules, (j, outcome), rollouts = _first_contact(task, worker, 0, 3)
     worker.close()
     assert schedules[0][1].env in ("wall_mx/chamfer", "wall_px/chamfer")  # along x
-    assert won is not None
-    j, outcome = won
+    assert outcome is not None
     assert j > 0 and outcome.success and len(outcome.steps) == 1
     accept = frozenset(schedules[j][1:])
     assert all(contacts & accept for contacts in outcome.belief.contacts)
@@ -371,14 +371,83 @@ def test_race_won_by_dijkstras_contact_in_its_first_chunk_changes_nothing(peg):
     the motion MakeContact finds from the same random state."""
     worker = RolloutWorker(peg, "panda")
     _, (_, plain), plain_rollouts = _first_contact(peg, worker, 3, 0)
-    _, won, race_rollouts = _first_contact(peg, worker, 3, 3)
+    _, (j, won), race_rollouts = _first_contact(peg, worker, 3, 3)
     worker.close()
-    assert won is not None and won[0] == 0 and plain.success
+    assert won is not None and j == 0 and plain.success
     assert race_rollouts == plain_rollouts <= 3 * 8  # one chunk, nothing else simulated
-    (a,), (b,) = plain.steps, won[1].steps
+    (a,), (b,) = plain.steps, won.steps
     assert a.contact == b.contact and a.score == b.score
     assert np.array_equal(a.motion.G_d.homogeneous, b.motion.G_d.homogeneous)
     assert np.array_equal(a.motion.K, b.motion.K)
+
+
+class _BestCounts(NullRecorder):
+    """The most particles any simulated motion brought into each contact."""
+
+    def __init__(self) -> None:
+        self.best: dict = {}
+
+    def transition(self, mode, motion, before, after, score, count, accepted) -> None:
+        self.best[mode] = max(self.best.get(mode, 0), count)
+
+
+def test_a_race_nobody_wins_hands_the_full_search_the_contact_it_got_furthest_with():
+    """grasp.x ±2 cm, two setpoints per particle, one chunk: no chamfer takes all three pegs
+    at once; the full search then goes to the contact whose best motion brought most
+    particles in (ties: the earlier schedule), not to Dijkstra's first."""
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.modes.schedule import belief_graph
+    from bilba_dist.planning.bilba import contact_search
+    from bilba_dist.planning.evaluate import Evaluator
+    from bilba_dist.planning.make_contact import race
+    from bilba_dist.task.loader import with_planner
+
+    task = with_planner(
+        load_task("peg-in-hole", ["grasp.x=2cm"]),
+        setpoints_per_particle=2,
+        noisy_setpoints=0,
+        race_chunks=1,
+    )
+    worker = RolloutWorker(task, "panda")
+    counts = _BestCounts()
+    search = contact_search(task, Evaluator(worker), "bilba-fixed", float("inf"), recorder=counts)
+    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, search.cache)
+    schedules = graph.alternatives(FREE, 3)
+    b0 = start_belief(task, initial_belief(task))
+    j, outcome = race(search, b0, schedules, np.random.default_rng(0))
+    worker.close()
+    best = [counts.best.get(s[1], 0) for s in schedules]
+    assert outcome is None and max(best) < 3
+    assert j == best.index(max(best)) and j > 0  # Dijkstra's first got fewer in
+
+
+def test_setpoints_of_particles_not_yet_in_the_contact_come_first():
+    """With particles 0 and 2 already in the contact sought, particle 1's setpoints are all
+    scored before theirs; with none in, the particles take turns."""
+    from dataclasses import replace
+
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.modes.schedule import belief_graph
+    from bilba_dist.planning.bilba import contact_search
+    from bilba_dist.planning.evaluate import Evaluator
+    from bilba_dist.planning.make_contact import sampled_candidates
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    worker = RolloutWorker(task, "panda")
+    search = contact_search(task, Evaluator(worker), "bilba-fixed", float("inf"))
+    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, search.cache)
+    mode = graph.schedule(FREE)[1]
+    b0 = start_belief(task, initial_belief(task))
+    some_in = replace(b0, contacts=(frozenset({mode}), b0.contacts[1], frozenset({mode})))
+    _, candidates = sampled_candidates(
+        search, some_in, mode, np.random.default_rng(0), frozenset({mode})
+    )
+    _, plain = sampled_candidates(search, b0, mode, np.random.default_rng(0), frozenset({mode}))
+    worker.close()
+    order = [c.screen_on for c in candidates]
+    k = order.count(1)
+    assert k > 0 and order[:k] == [1] * k and set(order[k:]) == {0, 2}
+    assert [c.screen_on for c in plain][:6] == [0, 1, 2, 0, 1, 2]
 
 
 def test_a_search_out_of_schedules_goes_on_until_its_timeout():

@@ -238,17 +238,18 @@ def _next_contact(
     ``race_contacts`` = k > 1, first race the next contacts of up to k schedules as short
     as Dijkstra's (its tie-break picks among them, and under a spread along a chamfer's
     normal it picks one the belief cannot make at once) and follow the winner; else, or
-    when none wins, the full search on Dijkstra's."""
+    when none wins, the full search on the contact the race got furthest with (most
+    particles in; ties: Dijkstra's)."""
     k = search.race_contacts
     schedules = graph.alternatives(mode, k) if k > 1 else [graph.schedule(mode)]
+    j = 0
     if len(schedules) > 1:
-        won = race(
+        j, outcome = race(
             search, belief, schedules, rng, lambda j: _follow(search, attempt, result, schedules[j])
         )
-        if won is not None:
-            j, outcome = won
+        if outcome is not None:
             return schedules[j], outcome
-    schedule = schedules[0]
+    schedule = schedules[j]
     _follow(search, attempt, result, schedule)
     return schedule, make_contact(search, belief, schedule[1], frozenset(schedule[1:]), rng)
 

@@ -129,10 +129,12 @@ def race(
     schedules: list[list[ContactPair]],
     rng: np.random.Generator,
     on_start: Callable[[int], None] = lambda j: None,
-) -> tuple[int, ContactOutcome] | None:
+) -> tuple[int, ContactOutcome | None]:
     """Race the next contacts of ``schedules``: a chunk of sampled setpoints for each in
     turn, ``race_chunks`` rounds, no GP; the first motion that brings every particle into
-    its schedule's next contact (or a later one) wins. None when none did.
+    its schedule's next contact (or a later one) wins: (its schedule, its outcome). When
+    none did, (the schedule whose best motion brought most particles in, None): the one
+    the full search should take on (ties: the earliest, Dijkstra's first).
 
     Each contact's setpoints are drawn when it first runs (``on_start(j)``), so when the
     first schedule wins its first chunk, the draws and the motion are those MakeContact
@@ -147,13 +149,14 @@ def race(
         round_, j = at
         return drawn[j][round_ * chunk : (round_ + 1) * chunk]
 
+    furthest: dict[int, tuple[int, int]] = {}  # schedule -> (particles, check particles) in
     turns = [(r, j) for r in range(search.race_chunks) for j in range(len(schedules))]
     for at, upcoming in zip(turns, [*turns[1:], None], strict=True):
         j = at[1]
         mode, accept = schedules[j][1], frozenset(schedules[j][1:])
         if j == len(drawn):
             on_start(j)
-            drawn.append(sampled_candidates(search, belief, mode, rng)[1])
+            drawn.append(sampled_candidates(search, belief, mode, rng, accept)[1])
         _check(search)
         scored, winner = search.evaluator.score(
             belief,
@@ -162,11 +165,14 @@ def race(
             _recording(search, mode, belief),
             then=chunk_of(upcoming),
         )
-        _report(search, mode, winner or best_of(scored))
+        best = winner or best_of(scored)
+        _report(search, mode, best)
+        if best is not None:
+            furthest[j] = max(furthest.get(j, (0, 0)), best.rank()[:2])
         if winner is not None and winner.posterior is not None:
             step = _accept(search, mode, belief, winner)
             return j, ContactOutcome(True, [step], winner.posterior)
-    return None
+    return max(range(len(schedules)), key=lambda j: (furthest.get(j, (0, 0)), -j)), None
 
 
 def _accept(search: ContactSearch, mode: ContactPair, belief: Belief, best: Scored) -> Step:
@@ -179,10 +185,18 @@ def _accept(search: ContactSearch, mode: ContactPair, belief: Belief, best: Scor
 
 
 def sampled_candidates(
-    search: ContactSearch, belief: Belief, mode: ContactPair, rng: np.random.Generator
+    search: ContactSearch,
+    belief: Belief,
+    mode: ContactPair,
+    rng: np.random.Generator,
+    accept: Accept = frozenset(),
 ) -> tuple[np.ndarray, list[Candidate]]:
     """The stiffness for ``mode`` and setpoints sampled on it for each particle, taken a
-    particle at a time; each candidate is screened on the particle it was made for."""
+    particle at a time; each candidate is screened on the particle it was made for.
+
+    The setpoints of particles not yet in ``accept`` come first: one already there needs
+    none of its own (the motion must only keep it there), so with ``sample_patience`` the
+    candidates scored before the search gives up are those that can add a particle."""
     K = search.stiffness(belief, mode, rng)
     per_particle = [
         [
@@ -198,7 +212,14 @@ def sampled_candidates(
         ]
         for i in range(len(belief))
     ]
-    return K, [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
+    ahead = [i for i, contacts in enumerate(belief.contacts) if contacts & accept]
+    lagging = [p for i, p in enumerate(per_particle) if i not in ahead]
+    return K, [*_interleaved(lagging), *_interleaved([per_particle[i] for i in ahead])]
+
+
+def _interleaved(per_particle: list[list[Candidate]]) -> list[Candidate]:
+    """One candidate of each particle in turn."""
+    return [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
 
 
 def _recording(
@@ -221,7 +242,7 @@ def best_motion(
     rng: np.random.Generator,
 ) -> Scored | None:
     """Sampled setpoints first (screened per particle); then GP rounds if none works for all."""
-    K, candidates = sampled_candidates(search, belief, mode, rng)
+    K, candidates = sampled_candidates(search, belief, mode, rng, accept)
     _check(search)
 
     record = _recording(search, mode, belief)
