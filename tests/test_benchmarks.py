@@ -95,3 +95,39 @@ def test_table1_puts_our_medians_beside_the_papers_with_the_ratio_to_best(tmp_pa
     assert "| puzzle | x1 | not run | not run | not run |" in run.stdout
     summary = json.loads(run.stdout.strip().splitlines()[-1])
     assert summary["cells"]["peg-in-hole/x1"]["bilba-variable"] == 4.0
+
+
+def test_compact_belief_plans_on_the_extremal_particles_and_a_seeded_subset_of_the_rest():
+    """b_plan(α): the 6 extremal particles of b_full and α of its 8 random ones, without
+    replacement, the same for the same seed; b_plan(8) is b_full."""
+    sys.path.insert(0, str(BENCHMARKS))
+    try:
+        from compact_belief import full_task, plan_task
+    finally:
+        sys.path.remove(str(BENCHMARKS))
+    from bilba_dist.belief.particles import initial_belief
+
+    def offsets(task):
+        return [tuple(sorted(p.offsets.items())) for p in initial_belief(task)]
+
+    full = offsets(full_task())
+    assert len(full) == 14 and len(set(full)) == 14
+    for alpha in (0, 3, 8):
+        picked = offsets(plan_task(alpha, seed=1))
+        assert len(picked) == 6 + alpha and len(set(picked)) == 6 + alpha
+        assert picked[:6] == full[:6] and set(picked) <= set(full)
+        assert picked == offsets(plan_task(alpha, seed=1))
+    assert set(offsets(plan_task(8, seed=0))) == set(full)
+    assert offsets(plan_task(3, seed=0)) != offsets(plan_task(3, seed=1))
+
+
+def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "compact_belief.py"), "--alphas", "9"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    errors = [line for line in run.stderr.splitlines() if "error:" in line]
+    assert errors == ["compact_belief.py: error: --alphas: each must be in 0..8"]
