@@ -421,35 +421,6 @@ def test_a_race_nobody_wins_hands_the_full_search_the_contact_it_got_furthest_wi
     assert j == best.index(max(best)) and j > 0  # Dijkstra's first got fewer in
 
 
-def test_setpoints_of_particles_not_yet_in_the_contact_come_first():
-    """With particles 0 and 2 already in the contact sought, particle 1's setpoints are all
-    scored before theirs; with none in, the particles take turns."""
-    from dataclasses import replace
-
-    from bilba_dist.belief.start import start_belief
-    from bilba_dist.modes.schedule import belief_graph
-    from bilba_dist.planning.bilba import contact_search
-    from bilba_dist.planning.evaluate import Evaluator
-    from bilba_dist.planning.make_contact import sampled_candidates
-
-    task = load_task("peg-in-hole", ["grasp.x=1cm"])
-    worker = RolloutWorker(task, "panda")
-    search = contact_search(task, Evaluator(worker), "bilba-fixed", float("inf"))
-    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, search.cache)
-    mode = graph.schedule(FREE)[1]
-    b0 = start_belief(task, initial_belief(task))
-    some_in = replace(b0, contacts=(frozenset({mode}), b0.contacts[1], frozenset({mode})))
-    _, candidates = sampled_candidates(
-        search, some_in, mode, np.random.default_rng(0), frozenset({mode})
-    )
-    _, plain = sampled_candidates(search, b0, mode, np.random.default_rng(0), frozenset({mode}))
-    worker.close()
-    order = [c.screen_on for c in candidates]
-    k = order.count(1)
-    assert k > 0 and order[:k] == [1] * k and set(order[k:]) == {0, 2}
-    assert [c.screen_on for c in plain][:6] == [0, 1, 2, 0, 1, 2]
-
-
 def test_a_search_out_of_schedules_goes_on_until_its_timeout():
     """With the defaults (no limit on pruning rounds or attempts), a search that prunes every
     edge out of free puts them back and tries again until the timeout, where the paper's
