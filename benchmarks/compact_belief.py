@@ -39,15 +39,15 @@ def full_task():  # type: ignore[no-untyped-def]
     return build_task(task.spec.model_copy(update={"belief": belief}), task.source)
 
 
-def plan_task(alpha: int, seed: int):  # type: ignore[no-untyped-def]
-    """The task whose belief is b_plan(α) for this seed: explicit particles."""
+def plan_task(full, alpha: int, seed: int):  # type: ignore[no-untyped-def]
+    """``full`` (from full_task) with b_plan(α) for this seed as its belief: explicit
+    particles."""
     import numpy as np
 
     from bilba_dist.belief.particles import initial_belief
     from bilba_dist.task.loader import build_task
     from bilba_dist.task.schema import ExplicitBelief
 
-    full = full_task()
     offsets = [p.offsets for p in initial_belief(full)]
     extremal, drawn = offsets[:-RANDOM], offsets[-RANDOM:]
     picked = np.random.default_rng(seed).choice(RANDOM, size=alpha, replace=False)
@@ -69,14 +69,14 @@ def run(job: tuple[int, int, str, float]) -> dict:
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
     planner, alpha, seed, timeout = job
-    task = plan_task(alpha, seed)
+    full = full_task()
+    task = plan_task(full, alpha, seed)
     backend = RolloutWorker(task)
     start = time.perf_counter()
     result = plan(task, backend, planner, seed=seed, timeout_s=timeout)
     elapsed = time.perf_counter() - start
     success = 0.0
     if result.success:
-        full = full_task()
         success = success_fraction(
             replay(full, result.motions, initial_belief(full), backend), full
         )
@@ -85,7 +85,7 @@ def run(job: tuple[int, int, str, float]) -> dict:
         "planner": planner,
         "alpha": alpha,
         "seed": seed,
-        "particles": len(initial_belief(task)),
+        "particles": len(task.spec.belief.particles),
         "found": result.success,
         "time_s": round(elapsed, 1),
         "rollouts": result.rollouts,

@@ -110,15 +110,16 @@ def test_compact_belief_plans_on_the_extremal_particles_and_a_seeded_subset_of_t
     def offsets(task):
         return [tuple(sorted(p.offsets.items())) for p in initial_belief(task)]
 
-    full = offsets(full_task())
+    task = full_task()
+    full = offsets(task)
     assert len(full) == 14 and len(set(full)) == 14
     for alpha in (0, 3, 8):
-        picked = offsets(plan_task(alpha, seed=1))
+        picked = offsets(plan_task(task, alpha, seed=1))
         assert len(picked) == 6 + alpha and len(set(picked)) == 6 + alpha
         assert picked[:6] == full[:6] and set(picked) <= set(full)
-        assert picked == offsets(plan_task(alpha, seed=1))
-    assert set(offsets(plan_task(8, seed=0))) == set(full)
-    assert offsets(plan_task(3, seed=0)) != offsets(plan_task(3, seed=1))
+        assert picked == offsets(plan_task(task, alpha, seed=1))
+    assert set(offsets(plan_task(task, 8, seed=0))) == set(full)
+    assert offsets(plan_task(task, 3, seed=0)) != offsets(plan_task(task, 3, seed=1))
 
 
 def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
