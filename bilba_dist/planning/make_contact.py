@@ -13,6 +13,7 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
 from bilba_dist.planning.gp import GPParams, features, propose
+from bilba_dist.planning.laggards import Rank, step_rank
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
@@ -238,9 +239,10 @@ def best_motion(
     scored, winner = search.evaluator.score(
         belief, candidates, accept, record, search.setpoints.patience
     )
-    best = winner or best_of(scored)
+    rank = step_rank(search.cache.task, belief.count(accept), mode, accept)
+    best = winner or _top(scored, rank)
     _report(search, mode, best)
-    idle = 0  # GP rounds in a row without a better score
+    idle = 0  # GP rounds in a row without a better motion
     for _ in range(search.gp.rounds if winner is None and scored else 0):
         _check(search)
         train = features([s.candidate.motion.G_d for s in scored])
@@ -252,15 +254,21 @@ def best_motion(
         simulated = max((s.score for s in more), default=0.0)
         search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)
         scored += more
-        previous = best.score if best is not None else 0.0
-        best = winner or best_of(scored)
+        previous = best
+        best = winner or _top(scored, rank)
         _report(search, mode, best)
         if winner is not None:
             break
-        idle = idle + 1 if best is None or best.score <= previous else 0
+        idle = idle + 1 if best is None or best is previous else 0
         if idle >= search.gp.patience:
             break
     return best
+
+
+def _top(scored: list[Scored], rank: Callable[[Scored], Rank]) -> Scored | None:
+    """The motion to take when none won: the best by ``rank`` (planning/laggards.py)."""
+    full = [s for s in scored if s.posterior is not None]
+    return max(full, key=rank) if full else None
 
 
 def _check(search: ContactSearch) -> None:

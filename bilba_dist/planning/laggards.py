@@ -1,0 +1,59 @@
+"""Which motion MakeContact takes when none brings every particle into the contact.
+
+It takes the one that brought most particles in, unless that one pushed a laggard (a
+particle not yet in the contact) past the plane of the contact's environment face: a peg
+resting on top of the wall whose inner face is the contact, say. Such a particle reaches
+the face only by moving back over the edge first, and the motion that would do it pulls
+the particles already in the contact away from the face, so the next motion almost never
+adds it and the contact fails. A motion is ranked by the particles it brought in less the
+laggards it left past the face (then fewer of those, the check particles it brought in,
+and its score); none that lost a particle already in is preferred to one that kept them.
+"""
+
+from collections.abc import Callable
+
+import numpy as np
+import pinocchio as pin
+
+from bilba_dist.belief.state import Accept, Belief
+from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.planning.evaluate import Scored
+from bilba_dist.task.loader import Task
+
+#: A particle is past the face when its part crosses the face's plane by more than this [m].
+PAST_M = 1e-3
+
+Rank = tuple[bool, int, int, int, float]
+
+
+def past_face(task: Task, mode: ContactPair, X_OM: pin.SE3) -> bool:
+    """Whether the manipuland piece of ``mode``, at ``X_OM``, lies past the plane of the
+    mode's environment face: the face's C-obs facet ``n·p = offset + max_m −n·(R m)``
+    (the piece's vertices ``m`` at rotation ``R``) has the part on its inner side."""
+    face = task.environment.face(mode.env)
+    piece = task.manipuland.pieces_by_name()[mode.manip.split("/", 1)[0]]
+    reach = float(np.max(-(piece.vertices @ X_OM.rotation.T) @ face.normal))
+    return float(face.normal @ X_OM.translation) - face.offset - reach < -PAST_M
+
+
+def laggards_past(task: Task, belief: Belief, mode: ContactPair, accept: Accept) -> int:
+    """Particles of ``belief`` not in ``accept`` that lie past ``mode``'s environment face."""
+    return sum(
+        past_face(task, mode, belief.X_OM(i))
+        for i, contacts in enumerate(belief.contacts)
+        if not contacts & accept
+    )
+
+
+def step_rank(
+    task: Task, before: int, mode: ContactPair, accept: Accept
+) -> Callable[[Scored], Rank]:
+    """The key MakeContact ranks scored motions by when none won; ``before``: particles in
+    ``accept`` before the motion."""
+
+    def rank(s: Scored) -> Rank:
+        assert s.posterior is not None
+        past = laggards_past(task, s.posterior, mode, accept)
+        return s.count >= before, s.count - past, -past, s.checked, s.score
+
+    return rank
