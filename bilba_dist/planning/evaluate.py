@@ -16,6 +16,7 @@ them all in before the contact is made.
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, RolloutResult
@@ -191,6 +192,7 @@ def _requests(belief: Belief, pairs: Sequence[tuple[int, Motion]]) -> list[Rollo
     return [RolloutRequest(belief.particles[i], belief.states[i], m) for i, m in pairs]
 
 
-def best_of(scored: Sequence[Scored]) -> Scored | None:
+def best_of(scored: Sequence[Scored], key: Callable[[Scored], Any] = Scored.rank) -> Scored | None:
+    """The best of the candidates simulated on every particle, by ``key``."""
     full = [s for s in scored if s.posterior is not None]
-    return max(full, key=Scored.rank) if full else None
+    return max(full, key=key) if full else None

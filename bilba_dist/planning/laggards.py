@@ -17,6 +17,7 @@ import pinocchio as pin
 
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.piece import Face
 from bilba_dist.planning.evaluate import Scored
 from bilba_dist.task.loader import Task
 
@@ -30,30 +31,46 @@ def past_face(task: Task, mode: ContactPair, X_OM: pin.SE3) -> bool:
     """Whether the manipuland piece of ``mode``, at ``X_OM``, lies past the plane of the
     mode's environment face: the face's C-obs facet ``n·p = offset + max_m −n·(R m)``
     (the piece's vertices ``m`` at rotation ``R``) has the part on its inner side."""
-    face = task.environment.face(mode.env)
-    piece = task.manipuland.pieces_by_name()[mode.manip.split("/", 1)[0]]
-    reach = float(np.max(-(piece.vertices @ X_OM.rotation.T) @ face.normal))
-    return float(face.normal @ X_OM.translation) - face.offset - reach < -PAST_M
+    return _past(*_face_and_piece(task, mode), X_OM)
 
 
 def laggards_past(task: Task, belief: Belief, mode: ContactPair, accept: Accept) -> int:
     """Particles of ``belief`` not in ``accept`` that lie past ``mode``'s environment face."""
-    return sum(
-        past_face(task, mode, belief.X_OM(i))
-        for i, contacts in enumerate(belief.contacts)
-        if not contacts & accept
-    )
+    return _laggards_past(_face_and_piece(task, mode), belief, accept)
 
 
 def step_rank(
     task: Task, before: int, mode: ContactPair, accept: Accept
 ) -> Callable[[Scored], Rank]:
     """The key MakeContact ranks scored motions by when none won; ``before``: particles in
-    ``accept`` before the motion."""
+    ``accept`` before the motion. Each motion is ranked once (the GP rounds rank the
+    sampled ones again)."""
+    plane, ranks = _face_and_piece(task, mode), dict[int, Rank]()
 
     def rank(s: Scored) -> Rank:
-        assert s.posterior is not None
-        past = laggards_past(task, s.posterior, mode, accept)
-        return s.count >= before, s.count - past, -past, s.checked, s.score
+        if id(s) not in ranks:
+            assert s.posterior is not None
+            past = _laggards_past(plane, s.posterior, accept)
+            ranks[id(s)] = (s.count >= before, s.count - past, -past, s.checked, s.score)
+        return ranks[id(s)]
 
     return rank
+
+
+def _face_and_piece(task: Task, mode: ContactPair) -> tuple[Face, np.ndarray]:
+    """``mode``'s environment face and its manipuland piece's vertices (part frames)."""
+    piece = task.manipuland.pieces_by_name()[mode.manip.split("/", 1)[0]]
+    return task.environment.face(mode.env), piece.vertices
+
+
+def _past(face: Face, vertices: np.ndarray, X_OM: pin.SE3) -> bool:
+    reach = float(np.max(-(vertices @ X_OM.rotation.T) @ face.normal))
+    return float(face.normal @ X_OM.translation) - face.offset - reach < -PAST_M
+
+
+def _laggards_past(plane: tuple[Face, np.ndarray], belief: Belief, accept: Accept) -> int:
+    return sum(
+        _past(*plane, belief.X_OM(i))
+        for i, contacts in enumerate(belief.contacts)
+        if not contacts & accept
+    )

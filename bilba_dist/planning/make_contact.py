@@ -13,7 +13,7 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
 from bilba_dist.planning.gp import GPParams, features, propose
-from bilba_dist.planning.laggards import Rank, step_rank
+from bilba_dist.planning.laggards import step_rank
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
@@ -240,7 +240,7 @@ def best_motion(
         belief, candidates, accept, record, search.setpoints.patience
     )
     rank = step_rank(search.cache.task, belief.count(accept), mode, accept)
-    best = winner or _top(scored, rank)
+    best = winner or best_of(scored, rank)
     _report(search, mode, best)
     idle = 0  # GP rounds in a row without a better motion
     for _ in range(search.gp.rounds if winner is None and scored else 0):
@@ -255,7 +255,7 @@ def best_motion(
         search.recorder.gp_round(mode, len(train), float(predicted[0]), simulated)
         scored += more
         previous = best
-        best = winner or _top(scored, rank)
+        best = winner or best_of(scored, rank)
         _report(search, mode, best)
         if winner is not None:
             break
@@ -263,12 +263,6 @@ def best_motion(
         if idle >= search.gp.patience:
             break
     return best
-
-
-def _top(scored: list[Scored], rank: Callable[[Scored], Rank]) -> Scored | None:
-    """The motion to take when none won: the best by ``rank`` (planning/laggards.py)."""
-    full = [s for s in scored if s.posterior is not None]
-    return max(full, key=rank) if full else None
 
 
 def _check(search: ContactSearch) -> None:
