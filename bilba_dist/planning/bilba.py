@@ -1,6 +1,8 @@
 """BILBA's outer loop (paper Algorithm 1): follow the contact schedule from Dijkstra, make
 each contact with MakeContact, replan after each contact reached, prune an edge that failed,
-and start over from the initial belief, up to ``n_attempts`` or the timeout."""
+and go on from the contact reached while a schedule from it is left (``keep_reached``; the
+paper starts over from the initial belief, as we do when none is), up to ``n_attempts`` or
+the timeout."""
 
 import itertools
 import time
@@ -210,6 +212,8 @@ def _attempts(
                 result.pruned.append((mode, target))
                 search.recorder.pruned((mode, target), outcome.reason)
                 result.reason = outcome.reason
+                if params.keep_reached and mode != FREE and graph.has_schedule(mode):
+                    continue  # go on from the contact reached, on another schedule
                 break
             steps += outcome.steps
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
