@@ -446,8 +446,9 @@ def test_a_search_out_of_schedules_goes_on_until_its_timeout():
 
 def test_no_plan_names_the_contact_that_blocked_it_and_why():
     """One setpoint per particle and no GP cannot bring the peg's three grasp.x particles onto
-    one chamfer: the reason names that chamfer and how far the best motion got. (With two,
-    the planner now finds a plan: laggards past a contact's face count against a motion.)"""
+    one chamfer, starting over after each pruned edge: the reason names that chamfer and how
+    far the best motion got. (With two setpoints, or going on from the contact reached, the
+    planner now finds a plan.)"""
     from bilba_dist.task.loader import with_planner
 
     task = with_planner(
@@ -457,6 +458,7 @@ def test_no_plan_names_the_contact_that_blocked_it_and_why():
         noisy_setpoints=0,
         gp_rounds=0,
         race_contacts=0,
+        keep_reached=False,
     )
     worker = RolloutWorker(task)
     result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=120)
