@@ -198,9 +198,13 @@ class Part:
         return [f.name for p in self.pieces for f in p.faces]
 
     def face(self, name: str) -> Face:
-        piece_name = name.split("/", 1)[0]
+        return self.piece(name).face(name)
+
+    def piece(self, face_name: str) -> ConvexPiece:
+        """The piece that holds the face ``face_name`` ("piece/face")."""
+        piece_name = face_name.split("/", 1)[0]
         for piece in self.pieces:
             if piece.name == piece_name:
-                return piece.face(name)
+                return piece
         known = ", ".join(p.name for p in self.pieces)
         raise GeometryError(f"part {self.name!r} has no piece {piece_name!r}; pieces: {known}")

@@ -59,8 +59,7 @@ def step_rank(
 
 def _face_and_piece(task: Task, mode: ContactPair) -> tuple[Face, np.ndarray]:
     """``mode``'s environment face and its manipuland piece's vertices (part frames)."""
-    piece = task.manipuland.pieces_by_name()[mode.manip.split("/", 1)[0]]
-    return task.environment.face(mode.env), piece.vertices
+    return task.environment.face(mode.env), task.manipuland.piece(mode.manip).vertices
 
 
 def _past(face: Face, vertices: np.ndarray, X_OM: pin.SE3) -> bool:

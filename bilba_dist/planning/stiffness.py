@@ -82,9 +82,7 @@ def cobs_normal(
     """Translational and rotational parts of the C-obs normal of ``mode`` near ``X_OM``:
     the gradient of the signed distance ``φ = n·p − b`` of the nearest facet carrying the
     mode, in position (n, unit) and in rotation (central differences about world axes)."""
-    env = task.environment.pieces_by_name()[mode.env.split("/")[0]]
-    pieces = task.manipuland.pieces_by_name()
-    manip = pieces[mode.manip.split("/")[0]]
+    env, manip = task.environment.piece(mode.env), task.manipuland.piece(mode.manip)
 
     def phi(R: np.ndarray) -> tuple[float, np.ndarray] | None:
         polytope = minkowski_polytope(env, manip, R)
