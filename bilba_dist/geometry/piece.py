@@ -179,9 +179,6 @@ class Part:
         if not self.pieces:
             raise GeometryError(f"part {self.name!r} has no pieces")
 
-    def pieces_by_name(self) -> dict[str, ConvexPiece]:
-        return {piece.name: piece for piece in self.pieces}
-
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The corners (min, max) of the part's vertices' bounding box [m, part frame]."""
         points = np.concatenate([p.vertices for p in self.pieces])
