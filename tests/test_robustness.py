@@ -9,10 +9,10 @@ import pytest
 
 from bilba_dist.belief.particles import initial_belief, make_particle
 from bilba_dist.belief.start import start_belief
-from bilba_dist.planning.bilba import check_belief, plan
+from bilba_dist.planning.bilba import check_belief, plan, planning_particles
 from bilba_dist.plans.replay import replay
 from bilba_dist.rollout import Motion
-from bilba_dist.task.loader import load_task, with_friction, with_planner
+from bilba_dist.task.loader import load_task, with_friction, with_planner, with_preset
 from bilba_dist.workers.rollout_worker import RolloutWorker
 from tests.test_task_files import run_cli
 
@@ -85,24 +85,39 @@ def _planned(motion: Motion):
 
 
 def test_robust_acceptance_brings_every_check_particle_home():
-    """With check_friction the plan's own check particles — the planning particles at
-    ×0.5 and ×1.5 friction and 2 drawn inside the bounds — reach the goal when the plan is
-    replayed on them from the start (what the planner believed of them is what happens)."""
-    task = with_planner(
-        load_task("peg-in-hole", ["grasp.pitch=2deg"]), check_friction=0.5, check_random=2
-    )
+    """By default the planning particles are simulated at 1.5 μ and their twins at μ and
+    0.5 μ (and, with check_random, particles drawn inside the bounds at all three) are check
+    particles: the plan brings each of them to the goal when replayed on it from the start
+    (what the planner believed of them is what happens)."""
+    task = with_planner(load_task("peg-in-hole", ["grasp.pitch=2deg"]), check_random=2)
+    assert task.spec.planner.check_friction == 0.5  # the default
     worker = RolloutWorker(task)
     result = plan(task, worker, "bilba-fixed", seed=0)
     assert result.success, result.reason
+    planning = planning_particles(task, initial_belief(task))
+    assert [p.friction_scale for p in planning] == [1.5] * 3
     check = check_belief(task, initial_belief(task))
     assert check is not None and len(check) == 2 * 3 + 3 * 2
+    assert sorted(p.friction_scale for p in check.particles) == [0.5] * 5 + [1.0] * 5 + [1.5] * 2
     assert result.final_belief is not None and result.final_belief.check is not None
     assert result.final_belief.check.count(frozenset([task.goal])) == len(check)
-    final = replay(task, result.motions, check.particles, worker)
+    final = replay(task, result.motions, [*planning, *check.particles], worker)
     assert all(task.goal in c for c in final.contacts)
-    off = with_planner(task, check_friction=0.0)
-    assert check_belief(off, initial_belief(off)) is None
-    assert start_belief(off, initial_belief(off)).check is None
+
+
+@pytest.mark.parametrize(
+    ("task", "why"),
+    [
+        (with_planner(load_task("peg-in-hole"), check_friction=0.0), "switched off"),
+        (load_task("peg-in-hole", ["grasp.x=1cm", "friction=30%"]), "friction is an axis"),
+        (with_preset(load_task("peg-in-hole"), "paper"), "the authors' planner"),
+    ],
+)
+def test_without_robust_acceptance_the_belief_is_planned_as_given(task, why):
+    particles = initial_belief(task)
+    assert planning_particles(task, particles) == particles, why
+    assert check_belief(task, particles) is None, why
+    assert start_belief(task, particles).check is None
 
 
 def test_validate_maps_success_over_two_axes(default_plan_file, tmp_path):

@@ -81,7 +81,8 @@ def plan(
     params = task.spec.planner
     particles = initial_belief(task)
     panda = PandaModel()
-    b0 = start_belief(task, particles).with_check(check_belief(task, particles))
+    b0 = start_belief(task, planning_particles(task, particles))
+    b0 = b0.with_check(check_belief(task, particles))
     result = PlanResult(False, "", [], variant, seed)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
     deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
@@ -114,20 +115,41 @@ def plan(
 CHECK_SEED = 7
 
 
+def robust_friction(task: Task) -> float:
+    """The friction margin of robust acceptance: ``planner.check_friction``, or 0 (off) when
+    the task's uncertainty has a friction axis (its particles then span the friction the
+    user gave, and are planned on as they are)."""
+    if task.spec.uncertainty.get("friction", 0.0) > 0:
+        return 0.0
+    return task.spec.planner.check_friction
+
+
+def planning_particles(task: Task, particles: tuple[Particle, ...]) -> tuple[Particle, ...]:
+    """The particles MakeContact plans on: with robust acceptance (margin f > 0), each at
+    friction x(1 + f), where compliant motions jam (docs/planner.md, Robust acceptance)."""
+    f = robust_friction(task)
+    if f == 0:
+        return particles
+    return tuple(make_particle(task, {**p.offsets, "friction": f}) for p in particles)
+
+
 def check_belief(task: Task, particles: tuple[Particle, ...]) -> Belief | None:
-    """The check particles of robust acceptance: each planning particle at friction
-    x(1 - f) and x(1 + f), f = ``planner.check_friction`` (None when 0)."""
-    params = task.spec.planner
-    f = params.check_friction
+    """The check particles of robust acceptance (margin f): the planning particles again at
+    friction x1 and x(1 - f), and ``planner.check_random`` more drawn inside the pose bounds
+    at x(1 - f), x1 and x(1 + f). None when f = 0."""
+    f = robust_friction(task)
     if f == 0:
         return None
-    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0 and k != "friction"}
-    drawn = random_offsets(bounds, params.check_random, seed=CHECK_SEED)
+    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
+    drawn = random_offsets(bounds, task.spec.planner.check_random, seed=CHECK_SEED)
     check = [
-        make_particle(task, {**o, "friction": sign * f})
-        for sign in (-1.0, 1.0)
-        for o in [*(p.offsets for p in particles), *drawn]
-    ] + [make_particle(task, o) for o in drawn]
+        make_particle(task, {**offsets, "friction": scale})
+        for offsets, scales in [
+            *((p.offsets, (0.0, -f)) for p in particles),
+            *((o, (-f, 0.0, f)) for o in drawn),
+        ]
+        for scale in scales
+    ]
     return start_belief(task, check)
 
 

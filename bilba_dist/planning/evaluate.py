@@ -7,11 +7,12 @@ achieve the current desired contact for every particle") or, with a patience, on
 candidates in a row have not raised the best score.
 
 Robust acceptance: a belief may carry check particles (``Belief.check``: the planning
-particles again at other frictions, planning/bilba.py). A motion that brings every planning
-particle into the contact is then also simulated on them, and wins only if it brings them
-all in too; one that does not is kept as a candidate (ranked by how many it brought), so the
-search goes on; MakeContact counts the check particles it brought as progress, and needs
-them all in before the contact is made.
+particles' twins at other frictions, planning/bilba.py). A motion that brings every planning
+particle into the contact is then also simulated on them (the chunk's best such motion first,
+the others only if it fails), and wins only if it brings them all in too; one that does not
+is kept as a candidate (ranked by how many it brought), so the search goes on; MakeContact
+counts the check particles it brought as progress, and needs them all in before the contact
+is made.
 """
 
 from collections.abc import Callable, Sequence
@@ -90,7 +91,7 @@ class Evaluator:
             scored += chunk_scored
             winners = [s for s in chunk_scored if s.count == len(belief)]
             if winners and belief.check is not None:
-                winners = self._checked(belief, winners, accept)
+                winners = self._check_in_turn(belief, winners, accept)
                 scored = [*scored[: -len(chunk_scored)], *self._merge(chunk_scored, winners)]
                 winners = [s for s in winners if s.checked == len(belief.check)]
             if winners:
@@ -100,6 +101,16 @@ class Evaluator:
             if patience and idle >= patience:
                 break
         return scored, None
+
+    def _check_in_turn(self, belief: Belief, winners: list[Scored], accept: Accept) -> list[Scored]:
+        """``winners`` checked best first: the best alone, the rest only if it fails (most
+        chunks of an easy contact are all winners, and the best passes)."""
+        assert belief.check is not None
+        ordered = sorted(winners, key=Scored.rank, reverse=True)
+        first = self._checked(belief, ordered[:1], accept)
+        if first[0].checked == len(belief.check):
+            return [*first, *ordered[1:]]
+        return [*first, *self._checked(belief, ordered[1:], accept)]
 
     def _checked(self, belief: Belief, winners: list[Scored], accept: Accept) -> list[Scored]:
         """``winners`` with their check particles simulated, in one batch."""
