@@ -46,7 +46,9 @@ def run(job: tuple[str, str, int, float, int, float]) -> dict:
         load_task(name, [axis]), check_friction=check, check_random=check_random, timeout_s=timeout
     )
     start = time.perf_counter()
-    result = plan(task, RolloutWorker(task), variant, seed=seed)
+    worker = RolloutWorker(task)
+    result = plan(task, worker, variant, seed=seed)
+    worker.close()
     row = {
         "setting": setting,
         "variant": variant,
@@ -58,7 +60,9 @@ def run(job: tuple[str, str, int, float, int, float]) -> dict:
     }
     for scale in FRICTIONS:
         scaled = with_friction(task, scale)
-        held = validate_plan(scaled, result.motions, RolloutWorker(scaled), 14, seed=1)
+        worker = RolloutWorker(scaled)
+        held = validate_plan(scaled, result.motions, worker, 14, seed=1)
+        worker.close()
         row[f"x{scale:g}"] = round(held.held_out or 0.0, 3) if result.success else None
     return row
 
@@ -84,7 +88,7 @@ def main() -> None:
     print(f"{'setting':<10}{'variant':<16}{'seed':>5}{'check':>6}{'time s':>8}{'rollouts':>9}"
           "  x0.5   x1    x1.5")  # fmt: skip
     rows = []
-    with ProcessPoolExecutor(args.jobs) as pool:
+    with ProcessPoolExecutor(args.jobs, max_tasks_per_child=1) as pool:  # a fresh world each
         for r in pool.map(run, jobs):
             rows.append(r)
             held = "  ".join(
