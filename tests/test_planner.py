@@ -467,6 +467,7 @@ def test_no_plan_names_the_contact_that_blocked_it_and_why():
     first = result.blocked[0]
     assert first.n == 3 and first.reached < 3 and first.no_region == 0
     assert first.spread_m == pytest.approx(0.02, abs=1e-3)  # ±1 cm of grasp x
+    assert first.n_check == 6 and 0 <= first.checked <= 6  # robust acceptance's twins
     counts = Counter(b.contact for b in result.blocked)
     top = max(counts.values())
     worst = next(b.contact for b in reversed(result.blocked) if counts[b.contact] == top)

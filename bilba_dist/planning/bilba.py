@@ -229,7 +229,9 @@ def _attempts(
             schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)
             target = schedule[1]
             if not outcome.success:
-                result.blocked.append(blocked(search.cache, belief, target, outcome.reached))
+                result.blocked.append(
+                    blocked(search.cache, belief, target, outcome.reached, outcome.checked)
+                )
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))
                 search.recorder.pruned((mode, target), outcome.reason)

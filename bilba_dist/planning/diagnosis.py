@@ -1,6 +1,7 @@
 """Why no plan was found, in terms a user can act on: which contact blocked the search, and
 why it could not be made — no region at the particles' rotations, the best single motion
-bringing only k of n particles in, the belief spread wider than the contact's region."""
+bringing only k of n particles in (or all n, but not all the check particles of robust
+acceptance), the belief spread wider than the contact's region."""
 
 from collections import Counter
 from dataclasses import dataclass
@@ -24,13 +25,17 @@ class Blocked:
     no_region: int  # particles at whose rotation (and start rotation) the contact has no region
     spread_m: float  # largest distance between two particles' part positions (env frame)
     region_m: float  # the contact region's largest extent (first particle that has one)
+    checked: int = 0  # check particles (robust acceptance) in the contact
+    n_check: int = 0  # check particles in all (0: robust acceptance off)
 
 
 def _diameter(points: np.ndarray) -> float:
     return float(pdist(points).max()) if len(points) > 1 else 0.0
 
 
-def blocked(cache: SliceCache, belief: Belief, contact: ContactPair, reached: int) -> Blocked:
+def blocked(
+    cache: SliceCache, belief: Belief, contact: ContactPair, reached: int, checked: int = 0
+) -> Blocked:
     """What stood in the way of ``contact`` from ``belief`` (no random draws: the planner's
     generator is untouched)."""
     positions, no_region = [], 0
@@ -46,9 +51,9 @@ def blocked(cache: SliceCache, belief: Belief, contact: ContactPair, reached: in
             no_region += 1
         elif region_m == 0.0:
             region_m = _diameter(np.unique(triangles.reshape(-1, 3), axis=0))
-    return Blocked(
-        contact, reached, len(belief), no_region, _diameter(np.array(positions)), region_m
-    )
+    n_check = len(belief.check) if belief.check is not None else 0
+    spread_m = _diameter(np.array(positions))
+    return Blocked(contact, reached, len(belief), no_region, spread_m, region_m, checked, n_check)
 
 
 def explain(failures: list[Blocked]) -> str:
@@ -66,7 +71,15 @@ def explain(failures: list[Blocked]) -> str:
             "there (a goal face that meets the other part only when tilted?)"
         )
     best = max(f.reached for f in same)
-    text += f"no motion brought more than {best} of {last.n} particles into it"
+    if best == last.n and last.n_check:
+        checked = max(f.checked for f in same if f.reached == last.n)
+        text += (
+            f"motions brought all {last.n} particles into it, but no more than {checked} of "
+            f"its {last.n_check} check particles (the same parts at other frictions: "
+            "planner.check_friction)"
+        )
+    else:
+        text += f"no motion brought more than {best} of {last.n} particles into it"
     if last.no_region:
         text += f"; it has no region at the rotations of {last.no_region} of {last.n} particles"
     if last.spread_m > last.region_m > 0:

@@ -71,6 +71,7 @@ class ContactOutcome:
     belief: Belief
     reason: str = ""
     reached: int = 0  # on failure: particles in the contact (or past it) when it gave up
+    checked: int = 0  # on failure: check particles in it then (robust acceptance)
 
 
 def make_contact(
@@ -100,7 +101,7 @@ def make_contact(
         steps,
         belief,
         f"{search.max_motions} motions did not reach {mode}",
-        belief.count(accept),
+        *_progress(belief, accept),
     )
 
 
@@ -121,7 +122,7 @@ def _failed(steps: list[Step], mode: ContactPair, belief: Belief, accept: Accept
             f"no motion brought more check particles into {mode} ({checked}/{len(belief.check)} "
             f"at other frictions; planner.check_friction)"
         )
-    return ContactOutcome(False, steps, belief, reason, count)
+    return ContactOutcome(False, steps, belief, reason, count, checked)
 
 
 def race(
