@@ -57,6 +57,15 @@ def test_furthest_common_mode_of_a_belief():
     assert furthest_common(schedule, belief_with([{C}, set()])) == FREE
 
 
+def test_furthest_common_mode_waits_for_the_check_particles():
+    """Robust acceptance: planning particles carried on to the goal (C) while a check
+    particle stays at the contact sought (B) have made B, not the goal."""
+    schedule = [FREE, A, B, C]
+    planned = belief_with([{B, C}, {C}])
+    assert furthest_common(schedule, planned.with_check(belief_with([{C}, {B}]))) == B
+    assert furthest_common(schedule, planned.with_check(belief_with([{C}, {B, C}]))) == C
+
+
 def test_variable_stiffness_is_soft_along_the_contact_normal(peg):
     X_OM = pin.SE3(np.eye(3), np.array([0.0, 0.0, 0.16]))
     K = variable_stiffness(peg, ContactPair("wall_px/inner", "peg/+x"), X_OM)

@@ -223,3 +223,35 @@ def test_friction_axis_and_map_on_a_task_of_our_own(tmp_path):
     assert mapped.exit_code == 0 and len(rows) == 9
     for corner in [(0.0, 0.0), (0.003, 0.0), (-0.003, 0.0), (0.0, 0.3), (0.0, -0.3)]:
         assert rows[corner] == 1, corner  # the plan's own particles lie on the grid
+
+
+@pytest.mark.slow
+def test_a_plan_that_carries_the_planning_particles_past_a_contact_waits_for_its_checks(
+    tmp_path,
+):
+    """An octagonal peg read from an STL file (2 mm clearance), grasp.x ±5 mm, seed 1: the
+    motion to its last wall contact carries the three planning particles (at 1.5 μ) on to
+    the floor but leaves four check particles at the wall; the plan must not end there, and
+    replayed from the start it brings every check particle home too."""
+    import trimesh
+    import yaml
+
+    from bilba_dist.task.prismatic import peg_in_hole_task, prism, regular_polygon
+
+    octagon = regular_polygon(8, 0.05)
+    data = peg_in_hole_task("octagon", [octagon], 0.002, 0.005)
+    mm = np.array(prism(np.array(octagon) * 1000, -75.0, 75.0))
+    trimesh.convex.convex_hull(mm).export(tmp_path / "peg.stl")
+    mesh = {"file": "peg.stl", "scale": 0.001, "faces": {"bottom": [0, 0, -1]}}
+    data["manipuland"]["pieces"] = [{"name": "peg", "mesh": mesh}]
+    path = tmp_path / "octagon.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    task = load_task(str(path), ["grasp.x=5mm"])
+    worker = RolloutWorker(task)
+    result = plan(task, worker, "bilba-variable", seed=1, timeout_s=120)
+    assert result.success, result.reason
+    check = check_belief(task, initial_belief(task))
+    assert check is not None
+    final = replay(task, result.motions, check.particles, worker)
+    worker.close()
+    assert [task.goal in c for c in final.contacts] == [True] * len(check)

@@ -290,10 +290,14 @@ def _follow(
 
 
 def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
-    """The furthest schedule mode that every particle has reached or passed."""
+    """The furthest schedule mode that every particle has reached or passed, check particles
+    included: a contact is made when they are all in it or past it, so a motion that carried
+    the planning particles on to the goal but left a check particle at the contact sought
+    has made that contact, not the goal (the plan then goes on from there)."""
+    check = belief.check.contacts if belief.check is not None else ()
     reached = [
         max((k for k, m in enumerate(schedule) if m in contacts), default=0)
-        for contacts in belief.contacts
+        for contacts in (*belief.contacts, *check)
     ]
     return schedule[min(reached)]
 
