@@ -179,6 +179,55 @@ def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
     assert scored[0].posterior is not None and scored[0].posterior.check is not None
 
 
+def test_when_only_check_particles_lag_a_candidate_is_screened_on_one_of_them(default_plan_file):
+    """Every planning particle in the default plan's first contact, its check particles still
+    at the start: a motion that brings none of them in costs one rollout (screened on a
+    lagging check particle; no planning particle is run), the plan's first motion is run on
+    all and wins, and MakeContact samples setpoints on the lagging check particles too."""
+    from bilba_dist.planning.bilba import contact_search
+    from bilba_dist.planning.evaluate import Candidate, Evaluator, lagging_checks
+    from bilba_dist.planning.make_contact import sampled_candidates
+    from bilba_dist.plans.file import read_plan
+
+    plan_file = read_plan(default_plan_file)
+    task = plan_file.task()
+    first = plan_file.motions[0]
+    accept = frozenset(m.contact for m in plan_file.motions)
+    worker = RolloutWorker(task)
+    particles = initial_belief(task)
+    planning = start_belief(task, planning_particles(task, particles))
+    check = check_belief(task, particles)
+    assert check is not None
+    motion = Motion(first.K, first.G_d, first.timeout_s)
+    _, reached = Evaluator(worker).score(planning, [Candidate(motion, 0)], accept)
+    assert reached is not None and reached.posterior is not None
+    lagging = reached.posterior.with_check(check)  # planning particles in, checks at the start
+    assert lagging_checks(lagging, accept) == list(range(len(check)))
+    assert lagging_checks(planning.with_check(check), accept) == []  # planning ones not in yet
+
+    # The same motion cut short: the planning particles stay pressed in, the check particles
+    # do not get there from the start (before, it was run on all 9 to find that out).
+    short = Motion(first.K, first.G_d, 0.05)
+    for candidate, rollouts in ((Candidate(short, 0), 1), (Candidate(motion, 0), 3 + 6)):
+        evaluator = Evaluator(worker)
+        scored, winner = evaluator.score(lagging, [candidate], accept)
+        assert evaluator.rollouts == rollouts
+        if candidate.motion is short:
+            assert winner is None and scored[0].posterior is None
+        else:
+            assert winner is not None and (winner.count, winner.checked) == (3, 6)
+
+    search = contact_search(task, Evaluator(worker), "bilba-fixed", deadline=float("inf"))
+    rng = np.random.default_rng(0)
+    _, candidates = sampled_candidates(search, lagging, first.contact, accept, rng)
+    on_check = [c.screen_on for c in candidates if c.on_check]
+    assert set(on_check) == set(range(len(check)))  # the lagging ones take turns too
+    assert {c.screen_on for c in candidates if not c.on_check} == set(range(len(planning)))
+    _, candidates = sampled_candidates(search, planning, first.contact, accept, rng)
+    assert candidates and not any(c.on_check for c in candidates)
+    worker.close()
+
+
 def test_a_heavy_particle_leaves_the_world_as_it_found_it(slide):
     """Particles' physics are set on the shared world only when they change, the part's
     inertia scaled with its mass (PyBullet, given a mass alone, recomputes the inertia from

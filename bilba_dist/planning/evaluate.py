@@ -12,7 +12,10 @@ particle into the contact is then also simulated on them (the chunk's best such 
 the others only if it fails), and wins only if it brings them all in too; one that does not
 is kept as a candidate (ranked by how many it brought), so the search goes on; MakeContact
 counts the check particles it brought as progress, and needs them all in before the contact
-is made.
+is made. Once every planning particle is in and only check particles lag, screening on a
+planning particle tells nothing (it is in already): a candidate is then screened on a lagging
+check particle instead (MakeContact samples it there, from that particle's state), and only
+one that brings it in is run on the rest.
 """
 
 from collections.abc import Callable, Sequence
@@ -27,6 +30,9 @@ from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, RolloutRe
 class Candidate:
     motion: Motion
     screen_on: int | None  # simulated on this particle first, the rest only if it works there
+    #: ``screen_on`` indexes the check particles (a candidate sampled for a check particle
+    #: that lags behind planning particles already in the contact)
+    on_check: bool = False
 
 
 @dataclass(frozen=True)
@@ -81,6 +87,9 @@ class Evaluator:
         scored: list[Scored] = []
         best, idle = 0.0, 0
         batches = [candidates[s : s + self.chunk] for s in range(0, len(candidates), self.chunk)]
+        lagging = lagging_checks(belief, accept)
+        if lagging:
+            return self._score_for_checks(belief, batches, lagging, accept, on_scored, patience)
         upcoming_batches = [*batches[1:], then[: self.chunk]][: len(batches)]
         for batch, upcoming in zip(batches, upcoming_batches, strict=True):
             own, ahead = self._screen(belief, batch), self._screen(belief, upcoming)
@@ -97,6 +106,63 @@ class Evaluator:
             if winners:
                 return scored, max(winners, key=Scored.rank)
             top = max(s.score for s in chunk_scored)
+            best, idle = (top, 0) if top > best else (best, idle + len(batch))
+            if patience and idle >= patience:
+                break
+        return scored, None
+
+    def _score_for_checks(
+        self,
+        belief: Belief,
+        batches: Sequence[Sequence[Candidate]],
+        lagging: list[int],
+        accept: Accept,
+        on_scored: Callable[[Scored], None],
+        patience: int,
+    ) -> tuple[list[Scored], Scored | None]:
+        """``score`` when every planning particle is in ``accept`` and only check particles
+        (``lagging``) are not: each candidate is screened on one lagging check particle (its
+        own, or the lagging ones in turn), and run on the planning particles and the other
+        check particles only if it brings that one in. Patience counts candidates that bring
+        no more check particles in than the best so far."""
+        assert belief.check is not None
+        check, n = belief.check, len(belief)
+        scored: list[Scored] = []
+        best, idle = -1, 0
+        for batch in batches:
+            on = [
+                c.screen_on if c.on_check and c.screen_on in lagging else lagging[j % len(lagging)]
+                for j, c in enumerate(batch)
+            ]
+            screens = self.simulate(
+                _requests(check, [(i, c.motion) for i, c in zip(on, batch, strict=True)])
+            )
+            promising = [j for j, r in enumerate(screens) if r.contacts & accept]
+            others = {j: [i for i in range(len(check)) if i != on[j]] for j in promising}
+            planning_pairs = [(i, batch[j].motion) for j in promising for i in range(n)]
+            check_pairs = [(i, batch[j].motion) for j in promising for i in others[j]]
+            rest = iter(
+                self.simulate([*_requests(belief, planning_pairs), *_requests(check, check_pairs)])
+            )
+            planning = {j: [next(rest) for _ in range(n)] for j in promising}
+            chunk_scored = [Scored(c, 0.0, 0, None) for c in batch]
+            for j in promising:
+                by_index = {on[j]: screens[j]} | {i: next(rest) for i in others[j]}
+                after = check.after([by_index[i] for i in range(len(check))])
+                posterior = belief.after(planning[j]).with_check(after)
+                chunk_scored[j] = Scored(
+                    batch[j],
+                    posterior.score(accept),
+                    posterior.count(accept),
+                    posterior,
+                    after.count(accept),
+                )
+                on_scored(chunk_scored[j])
+            scored += chunk_scored
+            winners = [s for s in chunk_scored if s.count == n and s.checked == len(check)]
+            if winners:
+                return scored, max(winners, key=Scored.rank)
+            top = max((s.checked for s in chunk_scored if s.count == n), default=-1)
             best, idle = (top, 0) if top > best else (best, idle + len(batch))
             if patience and idle >= patience:
                 break
@@ -197,6 +263,13 @@ class Evaluator:
             posterior = belief.after([results[i] for i in range(n)])
             out.append(Scored(c, posterior.score(accept), posterior.count(accept), posterior))
         return out
+
+
+def lagging_checks(belief: Belief, accept: Accept) -> list[int]:
+    """The check particles not in ``accept`` when every planning particle is (else none)."""
+    if belief.check is None or belief.count(accept) < len(belief):
+        return []
+    return [i for i, c in enumerate(belief.check.contacts) if not c & accept]
 
 
 def _requests(belief: Belief, pairs: Sequence[tuple[int, Motion]]) -> list[RolloutRequest]:

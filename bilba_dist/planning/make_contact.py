@@ -11,7 +11,7 @@ import pinocchio as pin
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
-from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of
+from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of, lagging_checks
 from bilba_dist.planning.gp import GPParams, features, propose
 from bilba_dist.planning.laggards import step_rank
 from bilba_dist.planning.recorder import NullRecorder, Recorder
@@ -158,7 +158,7 @@ def race(
         mode, accept = schedules[j][1], frozenset(schedules[j][1:])
         if j == len(drawn):
             on_start(j)
-            drawn.append(sampled_candidates(search, belief, mode, rng)[1])
+            drawn.append(sampled_candidates(search, belief, mode, accept, rng)[1])
         _check(search)
         scored, winner = search.evaluator.score(
             belief,
@@ -187,28 +187,37 @@ def _accept(search: ContactSearch, mode: ContactPair, belief: Belief, best: Scor
 
 
 def sampled_candidates(
-    search: ContactSearch, belief: Belief, mode: ContactPair, rng: np.random.Generator
+    search: ContactSearch,
+    belief: Belief,
+    mode: ContactPair,
+    accept: Accept,
+    rng: np.random.Generator,
 ) -> tuple[np.ndarray, list[Candidate]]:
     """The stiffness for ``mode`` and setpoints sampled on it for each particle, taken a
     particle at a time; each candidate is screened on the particle it was made for.
 
     The particles take turns even when some are already in the contact: scoring the
     laggards' setpoints first cut the peg's ±2 cm searches by a third but made plans that
-    just reach the extreme particles and miss those between (benchmarks/HISTORY.md)."""
+    just reach the extreme particles and miss those between (benchmarks/HISTORY.md). When
+    every planning particle is in and only check particles lag (robust acceptance), those
+    take turns too, sampled from their own states (after the planning particles' draws)."""
     K = search.stiffness(belief, mode, rng)
+    sources = [(belief, i, False) for i in range(len(belief))]
+    if belief.check is not None:
+        sources += [(belief.check, i, True) for i in lagging_checks(belief, accept)]
     per_particle = [
         [
-            Candidate(search.motion(K, G_d), i)
+            Candidate(search.motion(K, G_d), i, on_check)
             for G_d in sample_setpoints(
-                belief.particles[i],
-                belief.states[i].X_WM,
+                source.particles[i],
+                source.states[i].X_WM,
                 mode,
                 search.cache,
                 search.setpoints,
                 rng,
             )
         ]
-        for i in range(len(belief))
+        for source, i, on_check in sources
     ]
     return K, [c for c in chain.from_iterable(zip_longest(*per_particle)) if c is not None]
 
@@ -233,7 +242,7 @@ def best_motion(
     rng: np.random.Generator,
 ) -> Scored | None:
     """Sampled setpoints first (screened per particle); then GP rounds if none works for all."""
-    K, candidates = sampled_candidates(search, belief, mode, rng)
+    K, candidates = sampled_candidates(search, belief, mode, accept, rng)
     _check(search)
 
     record = _recording(search, mode, belief)
