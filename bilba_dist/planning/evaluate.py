@@ -14,8 +14,8 @@ is kept as a candidate (ranked by how many it brought), so the search goes on; M
 counts the check particles it brought as progress, and needs them all in before the contact
 is made. Once every planning particle is in and only check particles lag, screening on a
 planning particle tells nothing (it is in already): a candidate is then screened on a lagging
-check particle instead (MakeContact samples it there, from that particle's state), and only
-one that brings it in is run on the rest.
+check particle instead (MakeContact samples setpoints on those particles too, taking turns
+with the planning particles'), and only one that brings it in is run on the rest.
 """
 
 from collections.abc import Callable, Sequence
