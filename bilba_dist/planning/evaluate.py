@@ -45,6 +45,12 @@ class Scored:
     posterior: Belief | None  # None: it failed its own particle and the rest were skipped
     checked: int = -1  # check particles it brought into the contact (-1: not simulated)
 
+    @classmethod
+    def of(cls, candidate: Candidate, posterior: Belief, accept: Accept) -> "Scored":
+        """``candidate`` scored by its ``posterior`` (and its check particles, if simulated)."""
+        checked = -1 if posterior.check is None else posterior.check.count(accept)
+        return cls(candidate, posterior.score(accept), posterior.count(accept), posterior, checked)
+
     def rank(self) -> tuple[int, int, float]:
         """Particles in, then check particles in, then the score (its tie-break)."""
         return self.count, self.checked, self.score
@@ -141,22 +147,16 @@ class Evaluator:
             others = {j: [i for i in range(len(check)) if i != on[j]] for j in promising}
             planning_pairs = [(i, batch[j].motion) for j in promising for i in range(n)]
             check_pairs = [(i, batch[j].motion) for j in promising for i in others[j]]
-            rest = iter(
-                self.simulate([*_requests(belief, planning_pairs), *_requests(check, check_pairs)])
+            results = self.simulate(
+                [*_requests(belief, planning_pairs), *_requests(check, check_pairs)]
             )
-            planning = {j: [next(rest) for _ in range(n)] for j in promising}
+            planning, checks = results[: len(planning_pairs)], iter(results[len(planning_pairs) :])
             chunk_scored = [Scored(c, 0.0, 0, None) for c in batch]
-            for j in promising:
-                by_index = {on[j]: screens[j]} | {i: next(rest) for i in others[j]}
+            for k, j in enumerate(promising):
+                by_index = {on[j]: screens[j]} | {i: next(checks) for i in others[j]}
                 after = check.after([by_index[i] for i in range(len(check))])
-                posterior = belief.after(planning[j]).with_check(after)
-                chunk_scored[j] = Scored(
-                    batch[j],
-                    posterior.score(accept),
-                    posterior.count(accept),
-                    posterior,
-                    after.count(accept),
-                )
+                posterior = belief.after(planning[k * n : (k + 1) * n]).with_check(after)
+                chunk_scored[j] = Scored.of(batch[j], posterior, accept)
                 on_scored(chunk_scored[j])
             scored += chunk_scored
             winners = [s for s in chunk_scored if s.count == n and s.checked == len(check)]
@@ -190,17 +190,9 @@ class Evaluator:
         results = self.simulate(requests)
         n, out = len(check), []
         for k, s in enumerate(winners):
-            after = check.after(results[k * n : (k + 1) * n])
             assert s.posterior is not None
-            out.append(
-                Scored(
-                    s.candidate,
-                    s.score,
-                    s.count,
-                    s.posterior.with_check(after),
-                    after.count(accept),
-                )
-            )
+            posterior = s.posterior.with_check(check.after(results[k * n : (k + 1) * n]))
+            out.append(Scored.of(s.candidate, posterior, accept))
         return out
 
     @staticmethod
@@ -260,8 +252,7 @@ class Evaluator:
             if len(results) < n:
                 out.append(Scored(c, 0.0, 0, None))
                 continue
-            posterior = belief.after([results[i] for i in range(n)])
-            out.append(Scored(c, posterior.score(accept), posterior.count(accept), posterior))
+            out.append(Scored.of(c, belief.after([results[i] for i in range(n)]), accept))
         return out
 
 
