@@ -228,6 +228,35 @@ def test_when_only_check_particles_lag_a_candidate_is_screened_on_one_of_them(de
     worker.close()
 
 
+def test_a_race_prefetches_no_screen_of_a_candidate_made_for_a_check_particle(
+    default_plan_file,
+):
+    """In a race, the chunk after one contact's may be another contact's, sampled on its
+    lagging check particles: its screens are on check particles, so the contact scored now
+    (no check particle lagging) must not prefetch them as planning particles' (it raised an
+    IndexError: a check particle's index past the planning particles', puzzle pitch ±2°)."""
+    from bilba_dist.planning.evaluate import Candidate, Evaluator, lagging_checks
+    from bilba_dist.plans.file import read_plan
+
+    plan_file = read_plan(default_plan_file)
+    task = plan_file.task()
+    first = plan_file.motions[0]
+    accept = frozenset(m.contact for m in plan_file.motions)
+    worker = RolloutWorker(task)
+    particles = initial_belief(task)
+    check = check_belief(task, particles)
+    assert check is not None and len(check) > len(particles)
+    belief = start_belief(task, planning_particles(task, particles)).with_check(check)
+    assert lagging_checks(belief, accept) == []
+    motion = Motion(first.K, first.G_d, first.timeout_s)
+    then = [Candidate(motion, len(check) - 1, on_check=True)]
+    evaluator = Evaluator(worker)
+    _, winner = evaluator.score(belief, [Candidate(motion, 0)], accept, then=then)
+    assert winner is not None and winner.count == len(particles)
+    assert winner.checked == len(check) and evaluator.rollouts == len(particles) + len(check)
+    worker.close()
+
+
 def test_a_heavy_particle_leaves_the_world_as_it_found_it(slide):
     """Particles' physics are set on the shared world only when they change, the part's
     inertia scaled with its mass (PyBullet, given a mass alone, recomputes the inertia from

@@ -98,7 +98,10 @@ class Evaluator:
             return self._score_for_checks(belief, batches, lagging, accept, on_scored, patience)
         upcoming_batches = [*batches[1:], then[: self.chunk]][: len(batches)]
         for batch, upcoming in zip(batches, upcoming_batches, strict=True):
-            own, ahead = self._screen(belief, batch), self._screen(belief, upcoming)
+            # ``then`` may be another contact's chunk (a race), sampled on its lagging check
+            # particles: those are screened on check particles, not prefetched here
+            own = self._screen(belief, batch)
+            ahead = self._screen(belief, [c for c in upcoming if not c.on_check])
             chunk_scored = self._score_chunk(belief, batch, own, ahead, accept)
             for s in chunk_scored:
                 if s.posterior is not None:
