@@ -15,6 +15,7 @@ killed driver) is ignored and that job runs again.
 import json
 import os
 import platform
+import re
 import sys
 import tempfile
 import time
@@ -31,6 +32,8 @@ from bilba_dist.task.schema import TaskSpec
 RECORDS = "records.jsonl"
 #: Ray re-runs a job this many times after a system failure (a dead node or process).
 JOB_RETRIES = 3
+#: The last lines of a failed job's traceback kept in its record.
+TRACEBACK_LINES = 12
 
 
 def execute_job(job: Job, spec: TaskSpec, source: str) -> dict[str, Any]:
@@ -176,8 +179,7 @@ def run_batch(
                 try:
                     result = ray.get(ref)
                 except ray.exceptions.RayError as exc:
-                    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
-                    result = {"status": "error", "reason": f"{type(exc).__name__}: {first}"}
+                    result = error_result(exc)
                 _append(out, _store(out, job, result))
                 counts.done += 1
                 counts.failed += result["status"] != "success"
@@ -185,6 +187,23 @@ def run_batch(
         counts.elapsed_s = time.perf_counter() - started
         on_progress(counts)
     return counts
+
+
+def error_result(exc: Exception) -> dict[str, Any]:
+    """The record of a job that raised: the job's own exception and where (Ray wraps it in a
+    RayTaskError whose text opens with colour codes), its traceback kept for a bug report."""
+    import ray
+
+    if isinstance(exc, ray.exceptions.RayTaskError) and exc.cause is not None:
+        cause = exc.cause
+        trace = re.sub(r"\x1b\[[0-9;]*m", "", exc.traceback_str).strip().splitlines()
+        return {
+            "status": "error",
+            "reason": f"{type(cause).__name__}: {cause}",
+            "traceback": trace[-TRACEBACK_LINES:],
+        }
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return {"status": "error", "reason": f"{type(exc).__name__}: {first}"}
 
 
 def progress_bar(total: int) -> tuple[Callable[[Counts], None], Callable[[], None]]:

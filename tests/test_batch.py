@@ -243,3 +243,24 @@ def test_a_jobs_file_preset_applies_to_every_job(tmp_path):
     result = run("batch", str(jobs), "--out", str(tmp_path / "out"))
     assert result.exit_code == 2 and "preset" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_job_that_raised_is_recorded_with_its_own_exception_and_traceback():
+    """A job's exception reaches the driver wrapped in Ray's RayTaskError, whose text opens
+    with colour codes and the worker's pid: the record names the job's own exception and
+    keeps the traceback's last lines, without colour codes."""
+    import ray
+
+    from bilba_dist.schedulers.batch import TRACEBACK_LINES, error_result
+
+    trace = "\x1b[36mray::execute_job()\x1b[39m (pid=1, ip=192.0.2.2)\n" + "\n".join(
+        f'  File "evaluate.py", line {k}, in score' for k in range(20)
+    )
+    wrapped = ray.exceptions.RayTaskError("execute_job", trace, IndexError("tuple index"))
+    record = error_result(wrapped)
+    assert record["status"] == "error" and record["reason"] == "IndexError: tuple index"
+    assert record["traceback"][-1] == '  File "evaluate.py", line 19, in score'
+    assert len(record["traceback"]) == TRACEBACK_LINES
+    assert not any("\x1b" in line for line in record["traceback"])
+    lost = error_result(ray.exceptions.RayError("the node died\nmore"))
+    assert lost == {"status": "error", "reason": "RayError: the node died"}
