@@ -179,6 +179,21 @@ def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
     assert scored[0].posterior is not None and scored[0].posterior.check is not None
 
 
+def _default_plan_start(plan_path):
+    """The default plan's task, first motion and accept set, a worker, and the planning and
+    check particles at the start."""
+    from bilba_dist.plans.file import read_plan
+
+    plan_file = read_plan(plan_path)
+    task = plan_file.task()
+    accept = frozenset(m.contact for m in plan_file.motions)
+    particles = initial_belief(task)
+    planning = start_belief(task, planning_particles(task, particles))
+    check = check_belief(task, particles)
+    assert check is not None
+    return task, plan_file.motions[0], accept, RolloutWorker(task), planning, check
+
+
 def test_when_only_check_particles_lag_a_candidate_is_screened_on_one_of_them(default_plan_file):
     """Every planning particle in the default plan's first contact, its check particles still
     at the start: a motion that brings none of them in costs one rollout (screened on a
@@ -187,17 +202,8 @@ def test_when_only_check_particles_lag_a_candidate_is_screened_on_one_of_them(de
     from bilba_dist.planning.bilba import contact_search
     from bilba_dist.planning.evaluate import Candidate, Evaluator, lagging_checks
     from bilba_dist.planning.make_contact import sampled_candidates
-    from bilba_dist.plans.file import read_plan
 
-    plan_file = read_plan(default_plan_file)
-    task = plan_file.task()
-    first = plan_file.motions[0]
-    accept = frozenset(m.contact for m in plan_file.motions)
-    worker = RolloutWorker(task)
-    particles = initial_belief(task)
-    planning = start_belief(task, planning_particles(task, particles))
-    check = check_belief(task, particles)
-    assert check is not None
+    task, first, accept, worker, planning, check = _default_plan_start(default_plan_file)
     motion = Motion(first.K, first.G_d, first.timeout_s)
     _, reached = Evaluator(worker).score(planning, [Candidate(motion, 0)], accept)
     assert reached is not None and reached.posterior is not None
@@ -236,24 +242,17 @@ def test_a_race_prefetches_no_screen_of_a_candidate_made_for_a_check_particle(
     (no check particle lagging) must not prefetch them as planning particles' (it raised an
     IndexError: a check particle's index past the planning particles', puzzle pitch ±2°)."""
     from bilba_dist.planning.evaluate import Candidate, Evaluator, lagging_checks
-    from bilba_dist.plans.file import read_plan
 
-    plan_file = read_plan(default_plan_file)
-    task = plan_file.task()
-    first = plan_file.motions[0]
-    accept = frozenset(m.contact for m in plan_file.motions)
-    worker = RolloutWorker(task)
-    particles = initial_belief(task)
-    check = check_belief(task, particles)
-    assert check is not None and len(check) > len(particles)
-    belief = start_belief(task, planning_particles(task, particles)).with_check(check)
+    _, first, accept, worker, planning, check = _default_plan_start(default_plan_file)
+    assert len(check) > len(planning)
+    belief = planning.with_check(check)
     assert lagging_checks(belief, accept) == []
     motion = Motion(first.K, first.G_d, first.timeout_s)
     then = [Candidate(motion, len(check) - 1, on_check=True)]
     evaluator = Evaluator(worker)
     _, winner = evaluator.score(belief, [Candidate(motion, 0)], accept, then=then)
-    assert winner is not None and winner.count == len(particles)
-    assert winner.checked == len(check) and evaluator.rollouts == len(particles) + len(check)
+    assert winner is not None and winner.count == len(planning)
+    assert winner.checked == len(check) and evaluator.rollouts == len(planning) + len(check)
     worker.close()
 
 
