@@ -195,13 +195,12 @@ def error_result(exc: Exception) -> dict[str, Any]:
     import ray
 
     if isinstance(exc, ray.exceptions.RayTaskError) and exc.cause is not None:
-        cause = exc.cause
         trace = re.sub(r"\x1b\[[0-9;]*m", "", exc.traceback_str).strip().splitlines()
-        return {
-            "status": "error",
-            "reason": f"{type(cause).__name__}: {cause}",
-            "traceback": trace[-TRACEBACK_LINES:],
-        }
+        return {**_error_line(exc.cause), "traceback": trace[-TRACEBACK_LINES:]}
+    return _error_line(exc)
+
+
+def _error_line(exc: BaseException) -> dict[str, Any]:
     first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
     return {"status": "error", "reason": f"{type(exc).__name__}: {first}"}
 

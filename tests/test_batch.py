@@ -262,5 +262,7 @@ def test_a_job_that_raised_is_recorded_with_its_own_exception_and_traceback():
     assert record["traceback"][-1] == '  File "evaluate.py", line 19, in score'
     assert len(record["traceback"]) == TRACEBACK_LINES
     assert not any("\x1b" in line for line in record["traceback"])
+    long = ray.exceptions.RayTaskError("execute_job", trace, ValueError("first\nsecond"))
+    assert error_result(long)["reason"] == "ValueError: first"
     lost = error_result(ray.exceptions.RayError("the node died\nmore"))
     assert lost == {"status": "error", "reason": "RayError: the node died"}
