@@ -14,6 +14,7 @@ import numpy as np
 import pinocchio as pin
 
 from bilba_dist.belief.particles import Particle
+from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactSet
 
 DynamicsModel = Literal["panda", "floating"]
@@ -108,3 +109,17 @@ class RolloutBackend(Protocol):
     def simulate(
         self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
     ) -> list[RolloutResult]: ...
+
+
+def require_world(task: object, backend: object) -> None:
+    """Refuse a backend whose worlds are another task's: a world carries the task's friction,
+    parts and time step (a particle only scales them), so replaying ``with_friction(task,
+    0.5)`` on a worker made for ``task`` would silently run at ``task``'s friction. Backends
+    that cannot tell (no ``simulates``) pass."""
+    simulates = getattr(backend, "simulates", None)
+    if simulates is not None and not simulates(task):
+        raise BilbaError(
+            "the rollout backend was made for another task's world (friction, parts, time "
+            "step or controller settings differ): make it from this task, e.g. "
+            "RolloutWorker(task)"
+        )

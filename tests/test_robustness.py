@@ -332,3 +332,26 @@ def test_a_plan_that_carries_the_planning_particles_past_a_contact_waits_for_its
     final = replay(task, result.motions, check.particles, worker)
     worker.close()
     assert [task.goal in c for c in final.contacts] == [True] * len(check)
+
+
+def test_a_plan_is_not_replayed_or_made_on_a_worker_of_another_friction(default_plan_file):
+    """A world carries its task's friction (a particle only scales it): validating a plan
+    at half the friction on a worker made for the task itself would run at the task's
+    friction and report it as the other. Refused in one line; a worker of the scaled task
+    replays it."""
+    from bilba_dist.errors import BilbaError
+    from bilba_dist.plans.file import read_plan
+    from bilba_dist.plans.replay import validate_plan
+
+    plan_file = read_plan(default_plan_file)
+    task = plan_file.task()
+    half = with_friction(task, 0.5)
+    worker = RolloutWorker(task)
+    with pytest.raises(BilbaError, match="another task's world"):
+        validate_plan(half, plan_file.motions, worker)
+    with pytest.raises(BilbaError, match="another task's world"):
+        plan(half, worker, "bilba-fixed", timeout_s=1)
+    worker.close()
+    scaled = RolloutWorker(half)
+    assert validate_plan(half, plan_file.motions, scaled).planning == 1.0
+    scaled.close()

@@ -17,7 +17,7 @@ from typing import Any
 
 from bilba_dist.rollout import DynamicsModel, RolloutRequest, RolloutResult
 from bilba_dist.task.loader import Task
-from bilba_dist.workers.rollout_worker import RolloutWorker
+from bilba_dist.workers.rollout_worker import RolloutWorker, world_key
 
 #: Ray tasks in flight per actor: one running, one queued behind it, so an actor never
 #: waits a round trip for its next task.
@@ -32,6 +32,11 @@ class RayPool:
 
         actor = ray.remote(num_cpus=1, max_restarts=-1, max_task_retries=-1)(RolloutWorker)
         self._use([actor.remote(task.spec, model) for _ in range(workers)], owner=True)
+        self.task = task
+
+    def simulates(self, task: Task) -> bool:
+        """Whether a rollout here is one of ``task``'s (`RolloutWorker.simulates`)."""
+        return world_key(task.spec) == world_key(self.task.spec)
 
     def _use(self, actors: list, owner: bool) -> None:
         import ray
@@ -50,6 +55,7 @@ class RayPool:
         comparing pool sizes back to back on one Ray instance; closing it kills nothing."""
         pool = object.__new__(RayPool)
         pool._use(self.actors[:workers], owner=False)
+        pool.task = self.task
         return pool
 
     def simulate(

@@ -58,6 +58,10 @@ class RolloutWorker:
             settings = driver_settings(settings, planner.driver)
         return settings
 
+    def simulates(self, task: Task) -> bool:
+        """Whether a rollout here is one of ``task``'s (same worlds and controller settings)."""
+        return world_key(task.spec) == world_key(self.task.spec)
+
     @staticmethod
     def _as_task(task: Task | TaskSpec) -> Task:
         return task if isinstance(task, Task) else build_task(task, task.name)
@@ -117,6 +121,13 @@ class RolloutWorker:
         if self._floating is not None:
             self._floating.close()
             self._floating = None
+
+
+def world_key(spec: TaskSpec) -> tuple:
+    """What a rollout depends on besides its request: the worlds and the settings a worker
+    takes from its task."""
+    planner = spec.planner
+    return (*_geometry(spec), planner.contact_distance_m, planner.cartesian_ramp, planner.driver)
 
 
 def _geometry(spec: TaskSpec) -> tuple:

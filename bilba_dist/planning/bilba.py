@@ -37,7 +37,7 @@ from bilba_dist.planning.result import PlanResult
 from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import driver_fit, fixed_stiffness, variable_stiffness
 from bilba_dist.robot.panda import PandaModel
-from bilba_dist.rollout import RolloutBackend
+from bilba_dist.rollout import RolloutBackend, require_world
 from bilba_dist.task.loader import Task
 
 Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
@@ -68,6 +68,7 @@ def plan(
 
     With ``validate_on`` (the Panda model, when ``backend`` simulates the faster floating
     model), a plan is returned only if replaying it there brings every particle to the goal."""
+    require_world(task, backend)
     progress = progress or Progress()
     if variant == "b-est":
         result = plan_best(task, backend, seed, timeout_s, recorder, lambda n: _count(progress, n))

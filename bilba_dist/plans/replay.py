@@ -11,7 +11,7 @@ from bilba_dist.belief.particles import Particle, initial_belief, make_particle,
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion
-from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest
+from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, require_world
 from bilba_dist.task.loader import Task
 from bilba_dist.task.schema import ANGULAR_AXES, PHYSICAL_AXES
 
@@ -24,6 +24,7 @@ def run_motions(
 ) -> Iterator[Belief]:
     """The belief after each motion in turn, from every particle's start state (one batch
     per motion)."""
+    require_world(task, backend)
     belief = start_belief(task, particles)
     for planned in motions:
         motion = Motion(planned.K, planned.G_d, planned.timeout_s)
