@@ -16,6 +16,7 @@ import pinocchio as pin
 from bilba_dist.belief.particles import Particle
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactSet
+from bilba_dist.task.loader import Task
 
 DynamicsModel = Literal["panda", "floating"]
 
@@ -111,7 +112,7 @@ class RolloutBackend(Protocol):
     ) -> list[RolloutResult]: ...
 
 
-def require_world(task: object, backend: object) -> None:
+def require_world(task: Task, backend: RolloutBackend) -> None:
     """Refuse a backend whose worlds are another task's: a world carries the task's friction,
     parts and time step (a particle only scales them), so replaying ``with_friction(task,
     0.5)`` on a worker made for ``task`` would silently run at ``task``'s friction. Backends
