@@ -180,6 +180,7 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
         assert result.exit_code == 2, (case, result.output)
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and "Traceback" not in result.stderr
+        assert result.stdout == "", (command, result.stdout)  # no table header before it
 
 
 def official_schema(name: str) -> dict:

@@ -22,12 +22,14 @@ def logs() -> None:
 @user_errors
 def summary(files: tuple[Path, ...]) -> None:
     """Task, planner, seed, duration, transitions, schedules and outcome of each log."""
-    click.echo(
+    header = (
         f"{'file':<40} {'task':<12} {'planner':<15} {'seed':>4} {'time s':>7} "
         f"{'trans':>6} {'sched':>5}  outcome"
     )
-    for path in files:
-        log = read_log(path)
+    for k, path in enumerate(files):
+        log = read_log(path)  # before the header: a bad first file prints only its error
+        if k == 0:
+            click.echo(header)
         meta = log.metadata
         outcome = (log.json("/outcome") or [{}])[-1]
         if not outcome:
