@@ -64,6 +64,7 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
     "100001 points": (edited("generator: axis ", "points: 100001\n  generator: axis "), "points"),
     "1 km bound": (edited("grasp.pitch: 2deg", "grasp.x: 1000m"), "outside"),
     "720 degree bound": (edited("grasp.pitch: 2deg", "grasp.pitch: 720deg"), "outside"),
+    "1e308 m bound": (edited("grasp.pitch: 2deg", "grasp.x: 1e308m"), "far outside ±10 cm"),
     "start inside": (
         edited("gripper: {xyz: [0.5, 0, 0.36]", "gripper: {xyz: [0.55, 0, 0.30]"),
         "inside the environment",

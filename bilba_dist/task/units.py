@@ -46,7 +46,9 @@ def within(limit: float, unit: str, scale: float = 1.0, what: str = ""):
         if not math.isfinite(value):
             raise ValueError(f"must be a finite number, got {value}")
         if abs(value) > limit * (1 + 1e-12):
-            raise ValueError(f"{value / scale:g} {unit} is outside ±{limit / scale:g} {unit}{what}")
+            shown = value / scale  # inf for 1e308 m quoted in cm: say "far outside" instead
+            size = f"{shown:g} {unit} is" if math.isfinite(shown) else "it is far"
+            raise ValueError(f"{size} outside ±{limit / scale:g} {unit}{what}")
         return value
 
     return check
