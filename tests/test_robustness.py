@@ -256,6 +256,35 @@ def test_a_race_prefetches_no_screen_of_a_candidate_made_for_a_check_particle(
     worker.close()
 
 
+def test_a_contact_every_particle_is_in_already_is_made_without_a_motion(default_plan_file):
+    """A schedule from the contact reached need not be the one that reached it, so the
+    belief may already be in its next contact: that contact is made with no motion and no
+    rollout (before, MakeContact searched for a motion that adds a particle, found none,
+    and pruned a good edge: puzzle env.y ±1 cm fixed, seed 1)."""
+    from bilba_dist.modes.schedule import belief_graph
+    from bilba_dist.planning.bilba import _next_contact, already_made, contact_search
+    from bilba_dist.planning.evaluate import Evaluator
+    from bilba_dist.planning.result import PlanResult
+    from bilba_dist.plans.file import read_plan
+
+    task, _, _, worker, planning, check = _default_plan_start(default_plan_file)
+    motions = read_plan(default_plan_file).motions
+    home = replay(task, motions, planning.particles, worker).with_check(
+        replay(task, motions, check.particles, worker)
+    )
+    evaluator = Evaluator(worker)
+    search = contact_search(task, evaluator, "bilba-fixed", deadline=float("inf"))
+    graph, _ = belief_graph(task, initial_belief(task), task.X_WG0, search.cache)
+    schedule = graph.schedule()
+    assert already_made(home, schedule) and not already_made(planning.with_check(check), schedule)
+    result = PlanResult(False, "", [], "bilba-fixed", 0)
+    rng = np.random.default_rng(0)
+    followed, outcome = _next_contact(graph, home, schedule[0], search, rng, 0, result)
+    assert outcome.success and outcome.steps == [] and outcome.belief is home
+    assert followed == schedule and evaluator.rollouts == 0
+    worker.close()
+
+
 def test_a_heavy_particle_leaves_the_world_as_it_found_it(slide):
     """Particles' physics are set on the shared world only when they change, the part's
     inertia scaled with its mass (PyBullet, given a mass alone, recomputes the inertia from
