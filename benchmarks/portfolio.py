@@ -26,6 +26,7 @@ SETTINGS = {
     "peg-x2-fixed": ("peg-in-hole", "grasp.x=2cm", "bilba-fixed"),
     "peg-y2-variable": ("peg-in-hole", "env.y=2cm", "bilba-variable"),
     "puzzle-x-variable": ("puzzle", "grasp.x=1cm", "bilba-variable"),
+    "puzzle-y-variable": ("puzzle", "env.y=1cm", "bilba-variable"),
 }
 
 
