@@ -108,6 +108,29 @@ def test_setpoints_fall_back_to_the_start_rotation_where_a_tilt_loses_the_mode()
     assert all(mode in c for c in cache.get(R_start).contacts(surface))
 
 
+def test_setpoints_fall_back_to_the_nominal_rotation_where_the_grasp_tilt_loses_the_mode():
+    """Held 2° pitched in the gripper, the puzzle part's neck fits the goal slot neither at
+    its current nor at its start rotation (both tilted): the samples come from the part's
+    nominal rotation, and each setpoint turns the gripper so that this particle's part is
+    level (before, such a particle had no setpoints: puzzle grasp.pitch ±2°, 4 of 7)."""
+    from bilba_dist.belief.particles import make_particle
+
+    task = load_task("puzzle", ["grasp.pitch=2deg"])
+    particle, cache = make_particle(task, {"grasp.pitch": np.deg2rad(2.0)}), SliceCache(task)
+    start = task.X_WG0 * particle.X_GM
+    R_start = (particle.X_WO.inverse() * start).rotation
+    assert len(cache.get(R_start).sample_mode(task.goal, 16, np.random.default_rng(0))) == 0
+    params, rng = SetpointParams(press_m=0.0), np.random.default_rng(0)
+    setpoints = sample_setpoints(particle, start, task.goal, cache, params, rng)
+    assert len(setpoints) == params.on_surface + params.noisy
+    nominal = make_particle(task, {})
+    R_level = (nominal.X_WO.inverse() * task.X_WG0 * nominal.X_GM).rotation
+    X_OMs = [particle.X_WO.inverse() * G_d * particle.X_GM for G_d in setpoints]
+    assert all(np.allclose(X_OM.rotation, R_level) for X_OM in X_OMs)
+    surface = np.array([X_OM.translation for X_OM in X_OMs[: params.on_surface]])
+    assert all(task.goal in c for c in cache.get(R_level).contacts(surface))
+
+
 def test_seeded_plan_brings_every_particle_to_the_hole_bottom(pitch_plan):
     task, _, result = pitch_plan
     assert result.success, result.reason

@@ -44,7 +44,8 @@ def blocked(
         X_OM = belief.X_OM(i)
         positions.append(X_OM.translation)
         triangles = cache.get(X_OM.rotation).mode_triangles(contact)[0]
-        if not len(triangles):  # as the sampler does: try the start rotation
+        if not len(triangles):  # as the sampler does: try the start rotation (then it
+            # samples at the nominal part's, turning this part: not a region of its own)
             start = start_rotation(particle, cache.task.X_WG0)
             triangles = cache.get(start).mode_triangles(contact)[0]
         if not len(triangles):

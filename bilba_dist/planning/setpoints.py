@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from bilba_dist.belief.particles import Particle
+from bilba_dist.belief.particles import Particle, make_particle
 from bilba_dist.cspace.slice import INSIDE
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
@@ -42,17 +42,22 @@ def sample_setpoints(
     noise (those that land outside C-obs keep their surface point).
 
     Where the slice at the current rotation has no point of the mode, the samples are taken
-    at the particle's start rotation instead (the setpoints then command that rotation). A
-    part resting tilted by 1e-4 rad can lose a mode that needs its faces parallel to the
-    environment's (the puzzle's lower block against a slot wall, 0.25 mm clearance): with
-    no samples for that particle, MakeContact would only sample for the others."""
+    at the particle's start rotation instead (the setpoints then command that rotation), and
+    where that has none either, at the nominal part's start rotation (the setpoints then turn
+    the gripper so that this particle's part is as the nominal one). A part resting tilted
+    by 1e-4 rad can lose a mode that needs its faces parallel to the environment's (the
+    puzzle's lower block against a slot wall, 0.25 mm clearance); one held 2° pitched in the
+    gripper loses the goal slot at its start rotation too: with no samples for that
+    particle, MakeContact would only sample for the others."""
     total = params.on_surface + params.noisy
     X_OM = particle.X_WO.inverse() * X_WM
     rotation = X_OM.rotation
     cslice = cache.get(rotation)
     points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
-    if len(points) == 0:
-        rotation = start_rotation(particle, cache.task.X_WG0)
+    for fallback in (particle, make_particle(cache.task, {})):
+        if len(points) > 0:
+            break
+        rotation = start_rotation(fallback, cache.task.X_WG0)
         cslice = cache.get(rotation)
         points = cslice.sample_mode(mode, total, rng, depth=(0.0, params.press_m))
     if len(points) == 0:
