@@ -301,9 +301,7 @@ def already_made(belief: Belief, schedule: list[ContactPair]) -> bool:
     the belief may be further along it than its first mode; searching for a motion into a
     contact every particle is in can only fail (no motion adds a particle) and pruned a
     good edge (puzzle env.y ±1 cm fixed, seed 1)."""
-    accept = frozenset(schedule[1:])
-    check = belief.check.contacts if belief.check is not None else ()
-    return all(c & accept for c in (*belief.contacts, *check))
+    return furthest_common(schedule, belief) != schedule[0]
 
 
 def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
