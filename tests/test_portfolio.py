@@ -63,3 +63,42 @@ def test_a_log_that_cannot_be_written_is_one_line_before_planning(tmp_path):
     assert result.exit_code == 2
     assert f"{log}: cannot write log" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1 and result.stdout == ""
+
+
+def test_cancelling_the_losers_keeps_their_worker_processes(tmp_path):
+    """A loser is interrupted, not killed: the worker that ran it serves the next task (a
+    forced cancel would kill it, and the next search would pay the imports again)."""
+    import os
+    import time
+
+    import ray
+
+    from bilba_dist.schedulers.portfolio import _stop
+    from bilba_dist.schedulers.session import ray_session
+
+    marker = tmp_path / "pid"
+
+    def busy(path: str) -> None:
+        with open(path, "w") as file:
+            file.write(str(os.getpid()))
+        end = time.monotonic() + 60
+        while time.monotonic() < end:
+            sum(range(1000))
+
+    def pid() -> int:
+        return os.getpid()
+
+    with ray_session(1, None):
+        ref = ray.remote(num_cpus=1)(busy).remote(str(marker))
+        while not marker.exists() or not marker.read_text():
+            time.sleep(0.05)
+        started = time.monotonic()
+        _stop(ray, [ref])
+        assert time.monotonic() - started < 5  # interrupted, not waited out
+        try:
+            ray.get(ref)
+            raise AssertionError("the search was not cancelled")
+        except ray.exceptions.TaskCancelledError:
+            pass
+        after = ray.get(ray.remote(num_cpus=1)(pid).remote())
+    assert after == int(marker.read_text())
