@@ -2,13 +2,17 @@
 instance.
 
     .venv/bin/python benchmarks/portfolio.py [--problems 10] [--setting peg-x2-fixed]
+        [--ns 1 2] [--cpus 2] [--parallel 1]
 
-Problem p is planned with seed p alone (N = 1), then with seeds p and p + 1000 side by side
-(N = 2), in one Ray session of 2 CPUs (a warm-up job first, so Numba's compile and Ray's
-worker start-up are paid before timing). Prints each pair, the median of the ratios, and the
-time to the first plan expected from N = 8, 16, 64 seeds by order statistics over the N = 1
-times (draws with replacement from their empirical distribution: the expectation can only
-reach the fastest seed measured, so more problems sharpen it). Ends with one JSON line.
+Problem p is planned with seed p alone (N = 1), then with seeds p, p + 1000, p + 2000, ...
+side by side (each N of ``--ns``), in one Ray session of ``--cpus`` CPUs (a warm-up job on
+every CPU first, so Numba's cache load and Ray's worker start-up are paid before timing).
+``--parallel`` problems run at once (each search still has a CPU of its own: keep
+``parallel * sum(ns)`` within ``--cpus``). Prints each problem, the median of the ratios to
+N = 1, and the time to the first plan expected from N = 2, 8, 16, 64 seeds by order
+statistics over the N = 1 times (draws with replacement from their empirical distribution:
+the expectation can only reach the fastest seed measured, so more problems sharpen it).
+Ends with one JSON line.
 """
 
 import argparse
@@ -17,6 +21,7 @@ import os
 import platform
 import statistics
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 from bilba_dist.schedulers.portfolio import run_portfolio
 from bilba_dist.schedulers.session import ray_session
@@ -42,36 +47,71 @@ def timed(task, variant: str, seeds: list[int], timeout: float) -> tuple[float, 
     return time.perf_counter() - start, found.winner
 
 
+def problem(task, variant: str, p: int, ns: list[int], timeout: float) -> dict:
+    row: dict = {"problem": p}
+    for n in ns:
+        row[f"n{n}_s"], row[f"n{n}_winner"] = timed(
+            task, variant, [p + 1000 * k for k in range(n)], timeout
+        )
+    return row
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--problems", type=int, default=10)
     parser.add_argument("--setting", choices=list(SETTINGS), default="peg-x2-fixed")
     parser.add_argument("--timeout", type=float, default=300.0)
+    parser.add_argument("--ns", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--cpus", type=int, default=2)
+    parser.add_argument("--parallel", type=int, default=1)
     args = parser.parse_args()
+    ns = sorted(set(args.ns) | {1})
+    if args.parallel * max(ns) > args.cpus:
+        parser.error(f"--parallel {args.parallel} × N {max(ns)} needs more than {args.cpus} CPUs")
     name, bound, variant = SETTINGS[args.setting]
     task = load_task(name, [bound])
-    print(f"# {platform.node()}, {os.cpu_count()} CPUs; {args.setting}; Ray with 2 CPUs")
+    print(
+        f"# {platform.node()}, {os.cpu_count()} CPUs; {args.setting}; Ray with {args.cpus} "
+        f"CPUs; N = {ns}; {args.parallel} problem(s) at a time"
+    )
     rows = []
-    with ray_session(2, None):
-        timed(task, variant, [999_999], args.timeout)  # warm-up
-        for p in range(args.problems):
-            one, _ = timed(task, variant, [p], args.timeout)
-            two, winner = timed(task, variant, [p, p + 1000], args.timeout)
-            rows.append({"problem": p, "n1_s": one, "n2_s": two, "n2_winner": winner})
-            print(
-                f"problem {p}: N=1 {one:6.1f} s   N=2 {two:6.1f} s (seed {winner} won)", flush=True
-            )
-    ratios = [r["n2_s"] / r["n1_s"] for r in rows]
+    with ray_session(args.cpus, None):
+        warm = [999_999 + k for k in range(args.cpus)]  # one short search on every CPU
+        with ThreadPoolExecutor(args.cpus) as pool:
+            list(pool.map(lambda seed: timed(task, variant, [seed], 5.0), warm))
+        with ThreadPoolExecutor(args.parallel) as pool:
+            for row in pool.map(
+                lambda p: problem(task, variant, p, ns, args.timeout), range(args.problems)
+            ):
+                rows.append(row)
+                cells = "   ".join(
+                    f"N={n} {row[f'n{n}_s']:6.1f} s (seed {row[f'n{n}_winner']})" for n in ns
+                )
+                print(f"problem {row['problem']}: {cells}", flush=True)
     singles = [r["n1_s"] for r in rows]
-    figures = {
+    figures: dict = {
         "setting": args.setting,
         "problems": len(rows),
+        "cpus": args.cpus,
+        "parallel": args.parallel,
         "median_n1_s": round(statistics.median(singles), 2),
-        "median_n2_s": round(statistics.median(r["n2_s"] for r in rows), 2),
-        "median_ratio_n2_n1": round(statistics.median(ratios), 3),
-        **{f"expected_n{n}_s": round(expected_min(singles, n), 2) for n in (1, 2, 8, 16, 64)},
     }
-    print(f"median N=2 / N=1: {figures['median_ratio_n2_n1']:.3f}")
+    figures["mean_n1_s"] = round(statistics.mean(singles), 2)
+    for n in ns[1:]:
+        times = [r[f"n{n}_s"] for r in rows]
+        figures[f"median_n{n}_s"] = round(statistics.median(times), 2)
+        figures[f"mean_n{n}_s"] = round(statistics.mean(times), 2)
+        figures[f"mean_ratio_n{n}_n1"] = round(statistics.mean(times) / statistics.mean(singles), 3)
+        ratio = statistics.median(r[f"n{n}_s"] / r["n1_s"] for r in rows)
+        figures[f"median_ratio_n{n}_n1"] = round(ratio, 3)
+        print(
+            f"N={n} / N=1: mean time {figures[f'mean_ratio_n{n}_n1']:.3f}, median time "
+            f"{figures[f'median_n{n}_s'] / figures['median_n1_s']:.3f}, median of the "
+            f"per-problem ratios {ratio:.3f}"
+        )
+    figures.update(
+        {f"expected_n{n}_s": round(expected_min(singles, n), 2) for n in (1, 2, 8, 16, 64)}
+    )
     expected = ", ".join(f"N={n} {figures[f'expected_n{n}_s']} s" for n in (1, 2, 8, 16, 64))
     print(f"expected time to the first plan (order statistics of the N=1 times): {expected}")
     print(json.dumps(figures))
