@@ -45,6 +45,14 @@ def count(text: str) -> int:
     return value
 
 
+def at_least_one(text: str) -> int:
+    """A count of CPUs, actors, searches or seeds: 1 or more."""
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be 1 or more, got {value}")
+    return value
+
+
 def metres(text: str) -> float:
     """A planner length in metres, 0 or more."""
     value = float(text)

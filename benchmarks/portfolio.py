@@ -23,6 +23,8 @@ import statistics
 import time
 from concurrent.futures import ThreadPoolExecutor
 
+from planning import at_least_one  # benchmarks/planning.py
+
 from bilba_dist.schedulers.portfolio import run_portfolio
 from bilba_dist.schedulers.session import ray_session
 from bilba_dist.task.loader import load_task
@@ -58,12 +60,12 @@ def problem(task, variant: str, p: int, ns: list[int], timeout: float) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--problems", type=int, default=10)
+    parser.add_argument("--problems", type=at_least_one, default=10)
     parser.add_argument("--setting", choices=list(SETTINGS), default="peg-x2-fixed")
     parser.add_argument("--timeout", type=float, default=300.0)
-    parser.add_argument("--ns", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--cpus", type=int, default=2)
-    parser.add_argument("--parallel", type=int, default=1)
+    parser.add_argument("--ns", type=at_least_one, nargs="+", default=[1, 2])
+    parser.add_argument("--cpus", type=at_least_one, default=2)
+    parser.add_argument("--parallel", type=at_least_one, default=1)
     args = parser.parse_args()
     ns = sorted(set(args.ns) | {1})
     if args.parallel * max(ns) > args.cpus:

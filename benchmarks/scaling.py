@@ -32,7 +32,7 @@ from pathlib import Path
 
 import ray
 from cpu_split import GROUPS, TimedBackend, batch_speedup, cpu_seconds, serial_bound, spent
-from planning import SETTINGS  # benchmarks/planning.py: name -> (task, uncertainty)
+from planning import SETTINGS, at_least_one  # benchmarks/planning.py
 
 from bilba_dist.planning.bilba import plan
 from bilba_dist.schedulers.batch import run_batch
@@ -130,13 +130,13 @@ def print_split(splits: dict[str, dict], rows: dict[str, dict], sizes: list[int]
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=5)
+    parser.add_argument("--seeds", type=at_least_one, default=5)
     parser.add_argument(
         "--settings", nargs="+", default=["peg-pitch", "peg-x"], choices=list(SETTINGS)
     )
-    parser.add_argument("--jobs-seeds", type=int, default=3)
-    parser.add_argument("--actors", type=int, nargs="+", default=[1, 2])
-    parser.add_argument("--batch-cpus", type=int, nargs="+", default=[1, 2])
+    parser.add_argument("--jobs-seeds", type=at_least_one, default=3)
+    parser.add_argument("--actors", type=at_least_one, nargs="+", default=[1, 2])
+    parser.add_argument("--batch-cpus", type=at_least_one, nargs="+", default=[1, 2])
     args = parser.parse_args()
     sizes = sorted(set(args.actors) | {1})  # 1 actor is every ratio's baseline
     cpu_counts = sorted(set(args.batch_cpus) | {1})

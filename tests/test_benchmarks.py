@@ -132,3 +132,43 @@ def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if "error:" in line]
     assert errors == ["compact_belief.py: error: --alphas: each must be in 0..8"]
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "error"),
+    [
+        ("scaling.py", ["--actors", "1", "0"], "argument --actors: must be 1 or more, got 0"),
+        ("scaling.py", ["--batch-cpus", "-2"], "argument --batch-cpus: must be 1 or more, got -2"),
+        ("portfolio.py", ["--parallel", "0"], "argument --parallel: must be 1 or more, got 0"),
+        (
+            "portfolio.py",
+            ["--ns", "1", "4", "--cpus", "2"],
+            "--parallel 1 × N 4 needs more than 2 CPUs",
+        ),
+    ],
+)
+def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script, args, error):
+    """Checked before Ray starts: a count below 1, or more searches at once than CPUs."""
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert [line for line in run.stderr.splitlines() if "error:" in line] == [
+        f"{script}: error: {error}"
+    ]
+
+
+def test_expected_first_plan_is_the_minimum_of_draws(monkeypatch):
+    """Order statistics against brute force: every N-tuple of draws from three times."""
+    import itertools
+
+    monkeypatch.syspath_prepend(str(BENCHMARKS))
+    from portfolio import expected_min
+
+    times = [3.0, 10.0, 30.0]
+    for n in (1, 2, 3):
+        tuples = list(itertools.product(times, repeat=n))
+        assert expected_min(times, n) == pytest.approx(sum(map(min, tuples)) / len(tuples))
