@@ -2,13 +2,15 @@
 instance.
 
     .venv/bin/python benchmarks/portfolio.py [--problems 10] [--setting peg-x2-fixed]
-        [--ns 1 2] [--cpus 2] [--parallel 1]
+        [--ns 1 2] [--cpus 2] [--parallel 1] [--search-actors 0]
 
 Problem p is planned with seed p alone (N = 1), then with seeds p, p + 1000, p + 2000, ...
 side by side (each N of ``--ns``), in one Ray session of ``--cpus`` CPUs (a warm-up job on
 every CPU first, so Numba's cache load and Ray's worker start-up are paid before timing).
 ``--parallel`` problems run at once (each search still has a CPU of its own: keep
-``parallel * sum(ns)`` within ``--cpus``). Prints each problem, the median of the ratios to
+``parallel * max(ns)`` within ``--cpus``). With ``--search-actors K`` each search runs its
+rollouts on K actors of its own (`bilba plan --portfolio N --search-actors K`), N × K CPUs.
+Prints each problem, the median of the ratios to
 N = 1, and the time to the first plan expected from N = 2, 8, 16, 64 seeds by order
 statistics over the N = 1 times (draws with replacement from their empirical distribution:
 the expectation can only reach the fastest seed measured, so more problems sharpen it).
@@ -23,7 +25,7 @@ import statistics
 import time
 from concurrent.futures import ThreadPoolExecutor
 
-from planning import at_least_one  # benchmarks/planning.py
+from planning import at_least_one, count  # benchmarks/planning.py
 
 from bilba_dist.schedulers.portfolio import run_portfolio
 from bilba_dist.schedulers.session import ray_session
@@ -43,17 +45,19 @@ def expected_min(times: list[float], n: int) -> float:
     return sum(t * ((m - i) ** n - (m - i - 1) ** n) / m**n for i, t in enumerate(ordered))
 
 
-def timed(task, variant: str, seeds: list[int], timeout: float) -> tuple[float, int | None]:
+def timed(
+    task, variant: str, seeds: list[int], timeout: float, actors: int = 0
+) -> tuple[float, int | None]:
     start = time.perf_counter()
-    found = run_portfolio(task, variant, seeds, timeout)
+    found = run_portfolio(task, variant, seeds, timeout, actors=actors)
     return time.perf_counter() - start, found.winner
 
 
-def problem(task, variant: str, p: int, ns: list[int], timeout: float) -> dict:
+def problem(task, variant: str, p: int, ns: list[int], timeout: float, actors: int) -> dict:
     row: dict = {"problem": p}
     for n in ns:
         row[f"n{n}_s"], row[f"n{n}_winner"] = timed(
-            task, variant, [p + 1000 * k for k in range(n)], timeout
+            task, variant, [p + 1000 * k for k in range(n)], timeout, actors
         )
     return row
 
@@ -66,15 +70,21 @@ def main() -> None:
     parser.add_argument("--ns", type=at_least_one, nargs="+", default=[1, 2])
     parser.add_argument("--cpus", type=at_least_one, default=2)
     parser.add_argument("--parallel", type=at_least_one, default=1)
+    parser.add_argument("--search-actors", type=count, default=0)
     args = parser.parse_args()
     ns = sorted(set(args.ns) | {1})
-    if args.parallel * max(ns) > args.cpus:
-        parser.error(f"--parallel {args.parallel} × N {max(ns)} needs more than {args.cpus} CPUs")
+    per_search = max(args.search_actors, 1)
+    if args.parallel * max(ns) * per_search > args.cpus:
+        parser.error(
+            f"--parallel {args.parallel} × N {max(ns)} × {per_search} CPUs a search needs more "
+            f"than {args.cpus} CPUs"
+        )
     name, bound, variant = SETTINGS[args.setting]
     task = load_task(name, [bound])
     print(
         f"# {platform.node()}, {os.cpu_count()} CPUs; {args.setting}; Ray with {args.cpus} "
-        f"CPUs; N = {ns}; {args.parallel} problem(s) at a time"
+        f"CPUs; N = {ns}; {args.parallel} problem(s) at a time; "
+        f"{args.search_actors or 'no'} rollout actors a search"
     )
     rows = []
     with ray_session(args.cpus, None):
@@ -83,7 +93,8 @@ def main() -> None:
             list(pool.map(lambda seed: timed(task, variant, [seed], 5.0), warm))
         with ThreadPoolExecutor(args.parallel) as pool:
             for row in pool.map(
-                lambda p: problem(task, variant, p, ns, args.timeout), range(args.problems)
+                lambda p: problem(task, variant, p, ns, args.timeout, args.search_actors),
+                range(args.problems),
             ):
                 rows.append(row)
                 cells = "   ".join(
@@ -96,6 +107,7 @@ def main() -> None:
         "problems": len(rows),
         "cpus": args.cpus,
         "parallel": args.parallel,
+        "search_actors": args.search_actors,
         "median_n1_s": round(statistics.median(singles), 2),
     }
     figures["mean_n1_s"] = round(statistics.mean(singles), 2)

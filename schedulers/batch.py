@@ -36,35 +36,42 @@ JOB_RETRIES = 3
 TRACEBACK_LINES = 12
 
 
-def execute_job(job: Job, spec: TaskSpec, source: str) -> dict[str, Any]:
-    """Plan one job in this process; return its outcome, plan text and log bytes."""
+def execute_job(job: Job, spec: TaskSpec, source: str, actors: int = 0) -> dict[str, Any]:
+    """Plan one job in this process, its rollouts here too or, with ``actors``, on that many
+    Ray actors of its own (`--portfolio N --search-actors K`); return its outcome, plan text
+    and log bytes."""
     from bilba_dist.planning.bilba import plan
     from bilba_dist.plans.file import dumps, plan_document
     from bilba_dist.record.writer import LogWriter
+    from bilba_dist.workers.pool import RayPool
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
     task = build_task(spec, source)
-    worker = RolloutWorker(task, job.model)
+    worker: RolloutWorker | RayPool = (
+        RayPool(task, actors, job.model) if actors else RolloutWorker(task, job.model)
+    )
     panda = RolloutWorker(task, "panda") if job.model == "floating" else None
-    with tempfile.TemporaryDirectory() as folder:
-        log = LogWriter(
-            Path(folder) / "log.mcap", task, job.planner, job.seed, job.model == "panda"
-        )
-        result = plan(
-            task,
-            worker,
-            job.planner,
-            job.seed,
-            job.timeout_s,
-            recorder=log,
-            validate_on=panda,
-        )
-        text = dumps(plan_document(result, task))
-        log.finish(text, result.outcome())
-        log_bytes = log.path.read_bytes()
-    worker.close()
-    if panda is not None:
-        panda.close()
+    try:
+        with tempfile.TemporaryDirectory() as folder:
+            log = LogWriter(
+                Path(folder) / "log.mcap", task, job.planner, job.seed, job.model == "panda"
+            )
+            result = plan(
+                task,
+                worker,
+                job.planner,
+                job.seed,
+                job.timeout_s,
+                recorder=log,
+                validate_on=panda,
+            )
+            text = dumps(plan_document(result, task))
+            log.finish(text, result.outcome())
+            log_bytes = log.path.read_bytes()
+    finally:  # also when a portfolio cancels this search: its actors go with it
+        worker.close()
+        if panda is not None:
+            panda.close()
     if result.success:
         status = "success"
     elif result.reason.startswith("timeout"):
@@ -75,6 +82,7 @@ def execute_job(job: Job, spec: TaskSpec, source: str) -> dict[str, Any]:
         "status": status,
         **result.outcome(),
         "host": platform.node(),
+        **({"rollout_actors": len(worker.actors)} if isinstance(worker, RayPool) else {}),
         "plan_text": text,
         "log_bytes": log_bytes,
     }

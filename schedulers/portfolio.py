@@ -46,17 +46,21 @@ def run_portfolio(
     seeds: list[int],
     timeout_s: float | None,
     model: DynamicsModel = "panda",
+    actors: int = 0,
 ) -> PortfolioResult:
-    """Run one search per seed in the current Ray session; return the first plan found."""
+    """Run one search per seed in the current Ray session; return the first plan found.
+    With ``actors``, each search plans in a task of no CPU of its own and runs its rollouts
+    on that many actors of one CPU each (N searches then take N × ``actors`` CPUs)."""
     import ray
 
-    remote = ray.remote(num_cpus=1, max_retries=JOB_RETRIES)(execute_job)
+    remote = ray.remote(num_cpus=0 if actors else 1, max_retries=JOB_RETRIES)(execute_job)
     timeout = timeout_s if timeout_s is not None else task.spec.planner.timeout_s
     pending = {
         remote.remote(
             Job(f"portfolio-s{seed}", task.name, "", (), variant, seed, timeout, model),
             task.spec,
             task.source,
+            actors,
         ): seed
         for seed in seeds
     }

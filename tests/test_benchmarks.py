@@ -143,7 +143,17 @@ def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
         (
             "portfolio.py",
             ["--ns", "1", "4", "--cpus", "2"],
-            "--parallel 1 × N 4 needs more than 2 CPUs",
+            "--parallel 1 × N 4 × 1 CPUs a search needs more than 2 CPUs",
+        ),
+        (
+            "portfolio.py",
+            ["--ns", "1", "2", "--search-actors", "2", "--cpus", "3"],
+            "--parallel 1 × N 2 × 2 CPUs a search needs more than 3 CPUs",
+        ),
+        (
+            "portfolio.py",
+            ["--search-actors", "-1"],
+            "argument --search-actors: must be 0 or more, got -1",
         ),
     ],
 )

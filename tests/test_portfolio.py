@@ -4,6 +4,7 @@ first plan found is written, and it is the plan its seed makes alone."""
 import json
 import re
 
+import pytest
 from click.testing import CliRunner
 
 from bilba_dist.cli.main import cli, register
@@ -35,6 +36,43 @@ def test_portfolio_writes_the_winning_seeds_plan_and_log(tmp_path):
         list(m.G_d.translation) for m in alone.motions
     ]
     assert read_log(log).metadata["seed"] == winner
+
+
+def test_portfolio_searches_on_actors_of_their_own_make_the_seeds_plan(tmp_path):
+    """--search-actors 1: each search's rollouts run on an actor of its own; the plan written
+    is still the winner's plan alone (a seeded plan is the same on any backend)."""
+    out = tmp_path / "plan.json"
+    result = run(
+        "plan", "peg-in-hole", "-u", "grasp.pitch=2deg", "--planner", "bilba-fixed",
+        "--seed", "5", "--portfolio", "2", "--search-actors", "1", "--workers", "2",
+        "--out", str(out), "--no-log",
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "1 rollout actor each" in result.output
+    winner = int(re.search(r"plan found by seed (\d+) .* on 1 actor\b", result.output).group(1))
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
+    alone = plan(task, RolloutWorker(task), "bilba-fixed", seed=winner)
+    assert [m["G_d"]["xyz"] for m in json.loads(out.read_text())["motions"]] == [
+        list(m.G_d.translation) for m in alone.motions
+    ]
+
+
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        (["--search-actors", "2"], "--search-actors is for --portfolio N (2 or more)"),
+        (
+            ["--portfolio", "2", "--search-actors", "2", "--workers", "3"],
+            "--portfolio 2 × --search-actors 2 needs 4 CPUs; the local Ray instance has "
+            "--workers 3",
+        ),
+    ],
+)
+def test_search_actors_that_cannot_run_are_one_line(args, error):
+    result = run("plan", "peg-in-hole", "--no-log", *args)
+    assert result.exit_code == 2
+    assert error in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
 
 
 def test_portfolio_needs_ray_workers(tmp_path):

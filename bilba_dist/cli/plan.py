@@ -81,6 +81,14 @@ EXIT_NO_PLAN = 1
     "plan found wins and the others are cancelled.",
 )
 @click.option(
+    "--search-actors",
+    type=Bounded(0, 1024, int),
+    default=0,
+    show_default=True,
+    help="With --portfolio: run each search's rollouts on K Ray actors of its own (N × K "
+    "CPUs in all) instead of in the search's process.",
+)
+@click.option(
     "--allow-start-contact",
     is_flag=True,
     help="Plan even if a particle's part starts inside the environment (refused by default).",
@@ -101,6 +109,7 @@ def plan_command(
     log_path: Path | None,
     no_log: bool,
     portfolio: int,
+    search_actors: int,
     allow_start_contact: bool,
 ) -> None:
     """Plan TASK (a built-in name or a YAML path). Exit 0 only when a plan was found."""
@@ -119,11 +128,19 @@ def plan_command(
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
+    if search_actors and portfolio == 1:
+        raise BilbaError("--search-actors is for --portfolio N (2 or more); one plan on K "
+                         "actors is --workers K")  # fmt: skip
     if portfolio > 1:
         if workers == 0:
             raise BilbaError("--portfolio runs its searches on Ray: give --workers 1 or more")
+        if search_actors and address is None and portfolio * search_actors > workers:
+            raise BilbaError(
+                f"--portfolio {portfolio} × --search-actors {search_actors} needs "
+                f"{portfolio * search_actors} CPUs; the local Ray instance has --workers {workers}"
+            )
         plan_portfolio(loaded, planner, seed, portfolio, timeout, workers, address, model,
-                       out, None if no_log else log_path)  # fmt: skip
+                       out, None if no_log else log_path, search_actors)  # fmt: skip
         return
     log = None if no_log else LogWriter(log_path, loaded, planner, seed, model == "panda")
     with (
@@ -169,6 +186,7 @@ def plan_portfolio(
     model: DynamicsModel,
     out: Path,
     log_path: Path | None,
+    actors: int = 0,
 ) -> None:
     """``n`` seeded searches on Ray; write the first plan found (and its log)."""
     from bilba_dist.schedulers.portfolio import run_portfolio
@@ -178,10 +196,11 @@ def plan_portfolio(
     click.echo(
         f"portfolio  {n} searches, seeds {seeds[0]}..{seeds[-1]}, on "
         f"{'the cluster at ' + address if address else f'a local Ray instance of {workers} CPUs'}"
+        + (f", {actors} rollout actor{'s' if actors > 1 else ''} each" if actors else "")
     )
     started = time.perf_counter()
     with ray_session(workers, address):
-        found = run_portfolio(task, planner, seeds, timeout, model)
+        found = run_portfolio(task, planner, seeds, timeout, model, actors)
     wall = time.perf_counter() - started
     output = found.output
     write_plan_text(output["plan_text"], out)
@@ -198,6 +217,11 @@ def plan_portfolio(
         click.echo(
             f"outcome    plan found by seed {found.winner} in {output['planning_time_s']:.1f} s "
             f"({wall:.1f} s with Ray), {output['rollouts']} rollouts"
+            + (
+                f" on {output['rollout_actors']} actor{'s' if output['rollout_actors'] > 1 else ''}"
+                if "rollout_actors" in output
+                else " in its own process"
+            )
             + (f"; before it: {ended}" if ended else "")
             + (
                 f"; cancelled: seeds {', '.join(map(str, found.cancelled))}"
