@@ -140,3 +140,24 @@ def test_cancelling_the_losers_keeps_their_worker_processes(tmp_path):
             pass
         after = ray.get(ray.remote(num_cpus=1)(pid).remote())
     assert after == int(marker.read_text())
+
+
+def test_searches_on_actors_give_their_cpus_back():
+    """After a portfolio with --search-actors, every CPU is free again: the winner closed
+    its pool and the cancelled search took its actors with it (none left holding a CPU)."""
+    import time
+
+    import ray
+
+    from bilba_dist.schedulers.portfolio import run_portfolio
+    from bilba_dist.schedulers.session import ray_session
+    from bilba_dist.task.loader import load_task
+
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg"])
+    with ray_session(2, None):
+        found = run_portfolio(task, "bilba-fixed", [3, 4], 60.0, actors=1)
+        assert found.winner in (3, 4) and found.output["rollout_actors"] == 1
+        deadline = time.monotonic() + 20
+        while ray.available_resources().get("CPU", 0) < 2 and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert ray.available_resources().get("CPU", 0) == 2
