@@ -144,16 +144,16 @@ def main() -> None:
     for setting in args.settings:
         times, splits[setting] = one_plan(*SETTINGS[setting], args.seeds, sizes)
         one, alone = times["1 actor"], times["in-process"]
+        first = splits[setting]["1 actor"]
         pools = {}
         for n in sizes[1:]:
             more, many = times[label(n)], splits[setting][label(n)]
             pools[str(n)] = {
                 "speedup": statistics.median(a / b for a, b in zip(one, more, strict=True)),
-                "total_ratio": splits[setting]["1 actor"]["wall"] / many["wall"],
-                "in_batch_speedup": batch_speedup(splits[setting]["1 actor"], many),
+                "total_ratio": first["wall"] / many["wall"],
+                "in_batch_speedup": batch_speedup(first, many),
                 "median_s": statistics.median(more),
             }
-        first = splits[setting]["1 actor"]
         rows[setting] = {
             "ray_overhead": statistics.median(a / b - 1 for a, b in zip(one, alone, strict=True)),
             "serial_share_1_actor": first["serial"] / first["wall"],

@@ -82,7 +82,7 @@ def execute_job(job: Job, spec: TaskSpec, source: str, actors: int = 0) -> dict[
         "status": status,
         **result.outcome(),
         "host": platform.node(),
-        **({"rollout_actors": len(worker.actors)} if isinstance(worker, RayPool) else {}),
+        **({"rollout_actors": actors} if actors else {}),
         "plan_text": text,
         "log_bytes": log_bytes,
     }
