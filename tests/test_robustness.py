@@ -10,6 +10,7 @@ import pytest
 from bilba_dist.belief.particles import initial_belief, make_particle
 from bilba_dist.belief.start import start_belief
 from bilba_dist.planning.bilba import check_belief, plan, planning_particles
+from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import replay
 from bilba_dist.rollout import Motion
 from bilba_dist.task.loader import load_task, with_friction, with_planner, with_preset
@@ -139,6 +140,21 @@ def test_validate_maps_success_over_two_axes(default_plan_file, tmp_path):
     )
 
 
+def test_validate_replays_at_the_time_step_asked_for(default_plan_file):
+    """`--timestep` replays in a finer (or coarser) simulation than the plan's; the header
+    names the step of the task the replay ran on."""
+    plain = run_cli("validate", str(default_plan_file), "--workers", "0")
+    assert plain.exit_code == 0, plain.output
+    step = read_plan(default_plan_file).task().spec.planner.sim_timestep_s
+    assert f"step {step * 1000:g} ms)" in plain.output
+    fine = run_cli("validate", str(default_plan_file), "--workers", "0", "--timestep", "0.002")
+    assert fine.exit_code == 0, fine.output
+    assert "step 2 ms)" in fine.output and "1.000 of 3 reach" in fine.output
+    bad = run_cli("validate", str(default_plan_file), "--workers", "0", "--timestep", "0.5")
+    assert bad.exit_code == 2 and "Traceback" not in bad.output
+    assert "'--timestep': 0.5 is not within" in bad.stderr, bad.output
+
+
 @pytest.mark.parametrize(
     ("maps", "fragment"),
     [
@@ -161,7 +177,6 @@ def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
     check particle it cannot bring along (the environment 5 cm off) it is scored, its check
     simulated, and not returned as the winner."""
     from bilba_dist.planning.evaluate import Candidate, Evaluator
-    from bilba_dist.plans.file import read_plan
 
     plan_file = read_plan(default_plan_file)
     task = plan_file.task()
@@ -182,8 +197,6 @@ def test_a_motion_that_loses_a_check_particle_does_not_win(default_plan_file):
 def _default_plan_start(plan_path):
     """The default plan's task, first motion and accept set, a worker, and the planning and
     check particles at the start."""
-    from bilba_dist.plans.file import read_plan
-
     plan_file = read_plan(plan_path)
     task = plan_file.task()
     accept = frozenset(m.contact for m in plan_file.motions)
@@ -265,7 +278,6 @@ def test_a_contact_every_particle_is_in_already_is_made_without_a_motion(default
     from bilba_dist.planning.bilba import _next_contact, already_made, contact_search
     from bilba_dist.planning.evaluate import Evaluator
     from bilba_dist.planning.result import PlanResult
-    from bilba_dist.plans.file import read_plan
 
     task, _, _, worker, planning, check = _default_plan_start(default_plan_file)
     motions = read_plan(default_plan_file).motions
@@ -369,7 +381,6 @@ def test_a_plan_is_not_replayed_or_made_on_a_worker_of_another_friction(default_
     friction and report it as the other. Refused in one line; a worker of the scaled task
     replays it."""
     from bilba_dist.errors import BilbaError
-    from bilba_dist.plans.file import read_plan
     from bilba_dist.plans.replay import validate_plan
 
     plan_file = read_plan(default_plan_file)

@@ -9,7 +9,7 @@ from bilba_dist.cli.options import SEED, Bounded, workers_option
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import success_map, validate_plan
-from bilba_dist.task.loader import parse_axis_items, with_friction
+from bilba_dist.task.loader import parse_axis_items, with_friction, with_planner
 
 
 @click.command("validate")
@@ -23,6 +23,12 @@ from bilba_dist.task.loader import parse_axis_items, with_friction
     help="Extra particles drawn inside the uncertainty bounds.",
 )
 @click.option("--friction-scale", type=Bounded(0.01, 10), default=1.0, show_default=True)
+@click.option(
+    "--timestep",
+    type=Bounded(1e-4, 0.02),
+    help="Replay at this physics time step [s], e.g. 0.002 to check a plan in a finer "
+    "simulation than it was planned in [default: the plan's].",
+)
 @click.option(
     "--seed", type=SEED, default=0, show_default=True, help="Seed for the held-out particles."
 )
@@ -53,6 +59,7 @@ def validate(
     task_name: str | None,
     held_out: int,
     friction_scale: float,
+    timestep: float | None,
     seed: int,
     maps: tuple[str, ...],
     points: int,
@@ -67,6 +74,9 @@ def validate(
     task = plan.task(task_name)
     if friction_scale != 1.0:
         task = with_friction(task, friction_scale)
+    if timestep is not None:
+        task = with_planner(task, sim_timestep_s=timestep)
+    step = f", step {task.spec.planner.sim_timestep_s * 1000:g} ms"
     from bilba_dist.schedulers.session import (
         rollout_backend,  # imports pybullet: after input checks
     )
@@ -74,7 +84,7 @@ def validate(
     with rollout_backend(task, workers) as backend:
         result = validate_plan(task, plan.motions, backend, held_out, seed)
         grid = success_map(task, plan.motions, backend, bounds, points) if bounds else None
-    click.echo(f"plan       {plan_path} ({len(plan.motions)} motions, task {task.name})")
+    click.echo(f"plan       {plan_path} ({len(plan.motions)} motions, task {task.name}{step})")
     click.echo(f"planning belief: {result.planning:.3f} of {result.n_planning} reach {task.goal}")
     if result.held_out is not None:
         click.echo(
@@ -86,7 +96,7 @@ def validate(
         csv, png = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
         try:
             csv.write_text(grid.csv(), encoding="utf-8")
-            grid.png(png, f"{plan_path.name}, friction x{friction_scale:g}")
+            grid.png(png, f"{plan_path.name}, friction x{friction_scale:g}{step}")
         except OSError as exc:
             raise BilbaError(f"{prefix}: cannot write the map: {exc.strerror or exc}") from None
         axes = " x ".join(f"{a} ±{maps[k].partition('=')[2]}" for k, a in enumerate(grid.axes))
