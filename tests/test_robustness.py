@@ -2,6 +2,7 @@
 `bilba validate --map`."""
 
 import csv
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -153,6 +154,23 @@ def test_validate_replays_at_the_time_step_asked_for(default_plan_file):
     bad = run_cli("validate", str(default_plan_file), "--workers", "0", "--timestep", "0.5")
     assert bad.exit_code == 2 and "Traceback" not in bad.output
     assert "'--timestep': 0.5 is not within" in bad.stderr, bad.output
+
+
+@pytest.mark.parametrize(
+    ("given", "csv_name", "png_name"),
+    [
+        ("out/run.v2", "run.v2.csv", "run.v2.png"),  # with_suffix wrote run.png, run.csv
+        ("out/step0.00208", "step0.00208.csv", "step0.00208.png"),
+        ("out/map.PNG", "map.csv", "map.png"),
+        ("out/map.csv", "map.csv", "map.png"),
+        ("out/map", "map.csv", "map.png"),
+    ],
+)
+def test_a_map_prefix_keeps_its_dots(given, csv_name, png_name):
+    from bilba_dist.cli.validate import map_paths
+
+    csv_path, png_path = map_paths(Path(given))
+    assert (csv_path, png_path) == (Path("out") / csv_name, Path("out") / png_name)
 
 
 @pytest.mark.parametrize(

@@ -92,8 +92,8 @@ def validate(
             f"friction x{friction_scale:g})"
         )
     if grid is not None:
-        prefix = map_out or plan_path.with_name(plan_path.stem + "-map")
-        csv, png = prefix.with_suffix(".csv"), prefix.with_suffix(".png")
+        csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
+        prefix = csv.with_suffix("")
         try:
             csv.write_text(grid.csv(), encoding="utf-8")
             grid.png(png, f"{plan_path.name}, friction x{friction_scale:g}{step}")
@@ -104,6 +104,13 @@ def validate(
             f"map:             {grid.success.mean():.3f} of {grid.success.size} over {axes} "
             f"-> {png}, {csv}"
         )
+
+
+def map_paths(prefix: Path) -> tuple[Path, Path]:
+    """PREFIX.csv and PREFIX.png; a PREFIX that ends in .png or .csv loses that ending, any
+    other dot stays (``run.v2`` → ``run.v2.png``, not ``run.png``)."""
+    name = prefix.stem if prefix.suffix.lower() in (".png", ".csv") else prefix.name
+    return prefix.with_name(name + ".csv"), prefix.with_name(name + ".png")
 
 
 def map_bounds(maps: tuple[str, ...]) -> dict[str, float]:
