@@ -173,6 +173,24 @@ def test_a_map_prefix_keeps_its_dots(given, csv_name, png_name):
     assert (csv_path, png_path) == (Path("out") / csv_name, Path("out") / png_name)
 
 
+def test_a_map_that_cannot_be_written_is_refused_before_it_is_computed(
+    default_plan_file, tmp_path, monkeypatch
+):
+    """A missing folder is reported before any replay, not after the map's rollouts."""
+
+    def replayed(*args, **kwargs):
+        raise AssertionError("replayed before the output folder was checked")
+
+    monkeypatch.setattr("bilba_dist.cli.validate.validate_plan", replayed)
+    monkeypatch.setattr("bilba_dist.cli.validate.success_map", replayed)
+    out = tmp_path / "missing" / "map"
+    args = ["--map", "grasp.x=1cm", "--map-out", str(out)]
+    result = run_cli("validate", str(default_plan_file), "--workers", "0", *args)
+    assert result.exit_code == 2, result.output
+    assert f"--map-out: cannot write into {out.parent}" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1
+
+
 @pytest.mark.parametrize(
     ("maps", "fragment"),
     [

@@ -1,5 +1,6 @@
 """`bilba validate PLAN`: replay a plan on its planning belief and on held-out particles."""
 
+import os
 from pathlib import Path
 
 import click
@@ -70,6 +71,9 @@ def validate(
     if friction_scale <= 0:
         raise BilbaError(f"--friction-scale must be positive, got {friction_scale}")
     bounds = map_bounds(maps)
+    csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
+    if bounds and not os.access(csv.parent, os.W_OK):  # before the map's rollouts, not after
+        raise BilbaError(f"--map-out: cannot write into {csv.parent} (missing or read-only)")
     plan = read_plan(plan_path)
     task = plan.task(task_name)
     if friction_scale != 1.0:
@@ -92,7 +96,6 @@ def validate(
             f"friction x{friction_scale:g})"
         )
     if grid is not None:
-        csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
         prefix = csv.with_suffix("")
         try:
             csv.write_text(grid.csv(), encoding="utf-8")
