@@ -123,18 +123,18 @@ def test_without_robust_acceptance_the_belief_is_planned_as_given(task, why):
 
 
 def test_validate_maps_success_over_two_axes(default_plan_file, tmp_path):
-    prefix = tmp_path / "map"
+    prefix = tmp_path / "maps" / "map.v2"  # a folder that is not there yet; a dotted name
     args = ["--map", "grasp.x=2cm", "--map", "friction=50%", "--points", "5"]
     result = run_cli(
         "validate", str(default_plan_file), "--workers", "0", *args, "--map-out", str(prefix)
     )
     assert result.exit_code == 0, result.output
-    rows = list(csv.DictReader((tmp_path / "map.csv").open()))
+    rows = list(csv.DictReader((tmp_path / "maps" / "map.v2.csv").open()))
     assert len(rows) == 25 and set(rows[0]) == {"grasp.x", "friction", "success"}
     at = {(float(r["grasp.x"]), float(r["friction"])): int(r["success"]) for r in rows}
     assert at[(0.0, 0.0)] == 1  # the nominal particle: the plan works there
     assert at[(0.02, 0.0)] == 0 and at[(-0.02, 0.0)] == 0  # 2 cm off in x: no pitch plan does
-    assert (tmp_path / "map.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (tmp_path / "maps" / "map.v2.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     fraction = sum(at.values()) / 25
     assert (
         f"map:             {fraction:.3f} of 25 over grasp.x ±2cm x friction ±50%" in result.output
@@ -176,18 +176,20 @@ def test_a_map_prefix_keeps_its_dots(given, csv_name, png_name):
 def test_a_map_that_cannot_be_written_is_refused_before_it_is_computed(
     default_plan_file, tmp_path, monkeypatch
 ):
-    """A missing folder is reported before any replay, not after the map's rollouts."""
+    """A folder that cannot be made (here: under a file) is reported before any replay, not
+    after the map's rollouts."""
 
     def replayed(*args, **kwargs):
         raise AssertionError("replayed before the output folder was checked")
 
     monkeypatch.setattr("bilba_dist.cli.validate.validate_plan", replayed)
     monkeypatch.setattr("bilba_dist.cli.validate.success_map", replayed)
-    out = tmp_path / "missing" / "map"
+    (tmp_path / "a-file").write_text("")
+    out = tmp_path / "a-file" / "maps" / "map"
     args = ["--map", "grasp.x=1cm", "--map-out", str(out)]
     result = run_cli("validate", str(default_plan_file), "--workers", "0", *args)
     assert result.exit_code == 2, result.output
-    assert f"--map-out: cannot write into {out.parent}" in result.stderr
+    assert f"--map-out: cannot make {out.parent}" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
 

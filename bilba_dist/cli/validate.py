@@ -51,7 +51,8 @@ from bilba_dist.task.loader import parse_axis_items, with_friction, with_planner
 @click.option(
     "--map-out",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="Where the map goes: PREFIX.png and PREFIX.csv [default: PLAN without .json, -map].",
+    help="Where the map goes: PREFIX.png and PREFIX.csv, its folder made if missing "
+    "[default: PLAN without .json, -map].",
 )
 @workers_option
 @user_errors
@@ -72,8 +73,8 @@ def validate(
         raise BilbaError(f"--friction-scale must be positive, got {friction_scale}")
     bounds = map_bounds(maps)
     csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
-    if bounds and not os.access(csv.parent, os.W_OK):  # before the map's rollouts, not after
-        raise BilbaError(f"--map-out: cannot write into {csv.parent} (missing or read-only)")
+    if bounds:  # a folder the map cannot go into: said before its rollouts, not after
+        map_folder(csv.parent)
     plan = read_plan(plan_path)
     task = plan.task(task_name)
     if friction_scale != 1.0:
@@ -107,6 +108,17 @@ def validate(
             f"map:             {grid.success.mean():.3f} of {grid.success.size} over {axes} "
             f"-> {png}, {csv}"
         )
+
+
+def map_folder(folder: Path) -> None:
+    """Make the map's folder (as `bilba plan` makes its plan file's); one line if it cannot
+    be made or written into."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BilbaError(f"--map-out: cannot make {folder}: {exc.strerror or exc}") from None
+    if not os.access(folder, os.W_OK):
+        raise BilbaError(f"--map-out: cannot write into {folder}")
 
 
 def map_paths(prefix: Path) -> tuple[Path, Path]:
