@@ -45,13 +45,21 @@ def check(job: tuple[str, list[float], int, float | None]) -> dict:
     return row
 
 
+def timestep(text: str) -> float:
+    """A physics step [s] inside the task schema's range, checked before any replay."""
+    value = float(text)
+    if not 1e-4 <= value <= 0.02:
+        raise argparse.ArgumentTypeError(f"must be within [0.0001, 0.02] s, got {text}")
+    return value
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("batch", type=Path)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0])
     parser.add_argument("--held-out", type=int, default=14)
     parser.add_argument("--frictions", type=float, nargs="+", default=[0.5, 1.0, 1.5])
-    parser.add_argument("--timestep", type=float, help="physics step [s] (default: the plan's)")
+    parser.add_argument("--timestep", type=timestep, help="physics step [s] (default: the plan's)")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
     records = [json.loads(line) for line in (args.batch / "records.jsonl").open()]

@@ -171,6 +171,21 @@ def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script,
     ]
 
 
+@pytest.mark.parametrize("value", ["nan", "0.5", "0", "-0.004"])
+def test_robustness_refuses_a_time_step_outside_the_schemas_range_in_one_line(value, tmp_path):
+    """Checked while parsing, before any plan is read or replayed."""
+    run = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "robustness.py"), str(tmp_path), "--timestep", value],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 2
+    assert [line for line in run.stderr.splitlines() if "error:" in line] == [
+        f"robustness.py: error: argument --timestep: must be within [0.0001, 0.02] s, got {value}"
+    ]
+
+
 def test_expected_first_plan_is_the_minimum_of_draws(monkeypatch):
     """Order statistics against brute force: every N-tuple of draws from three times."""
     import itertools

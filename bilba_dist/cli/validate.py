@@ -72,11 +72,11 @@ def validate(
     if friction_scale <= 0:
         raise BilbaError(f"--friction-scale must be positive, got {friction_scale}")
     bounds = map_bounds(maps)
+    plan = read_plan(plan_path)
+    task = plan.task(task_name)
     csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
     if bounds:  # a folder the map cannot go into: said before its rollouts, not after
         map_folder(csv.parent)
-    plan = read_plan(plan_path)
-    task = plan.task(task_name)
     if friction_scale != 1.0:
         task = with_friction(task, friction_scale)
     if timestep is not None:
