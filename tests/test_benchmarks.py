@@ -9,6 +9,16 @@ import pytest
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
 
+def run_script(script: str, *args: str) -> subprocess.CompletedProcess:
+    """benchmarks/SCRIPT with ``args``, in this interpreter, output captured."""
+    return subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), *args],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+
+
 @pytest.mark.parametrize(
     ("flag", "value", "shown"),
     [
@@ -20,12 +30,7 @@ BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
     ],
 )
 def test_planning_benchmark_refuses_a_negative_setting_in_one_line(flag, value, shown):
-    run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "planning.py"), flag, value],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_script("planning.py", flag, value)
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if "error:" in line]
     assert errors == [f"planning.py: error: argument {flag}: must be 0 or more, got {shown}"]
@@ -81,10 +86,7 @@ def test_table1_puts_our_medians_beside_the_papers_with_the_ratio_to_best(tmp_pa
     rows += [record("bilba-fixed", 0, "success", 3.0), record("bilba-fixed", 1, "timeout", 900)]
     rows += [record("b-est", 0, "success", 100.0), record("b-est", 1, "timeout", 650.0)]
     (tmp_path / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
-    run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "table1.py"), str(tmp_path)],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+    run = run_script("table1.py", str(tmp_path))
     assert run.returncode == 0, run.stderr
     line = next(x for x in run.stdout.splitlines() if x.startswith("| peg-in-hole | x1 |"))
     # B-EST: median of 100 and the 600 s timeout = 350; BILBA's faster median 3.0
@@ -123,12 +125,7 @@ def test_compact_belief_plans_on_the_extremal_particles_and_a_seeded_subset_of_t
 
 
 def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
-    run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "compact_belief.py"), "--alphas", "9"],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_script("compact_belief.py", "--alphas", "9")
     assert run.returncode == 2
     errors = [line for line in run.stderr.splitlines() if "error:" in line]
     assert errors == ["compact_belief.py: error: --alphas: each must be in 0..8"]
@@ -159,12 +156,7 @@ def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
 )
 def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script, args, error):
     """Checked before Ray starts: a count below 1, or more searches at once than CPUs."""
-    run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / script), *args],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_script(script, *args)
     assert run.returncode == 2
     assert [line for line in run.stderr.splitlines() if "error:" in line] == [
         f"{script}: error: {error}"
@@ -174,12 +166,7 @@ def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script,
 @pytest.mark.parametrize("value", ["nan", "0.5", "0", "-0.004"])
 def test_robustness_refuses_a_time_step_outside_the_schemas_range_in_one_line(value, tmp_path):
     """Checked while parsing, before any plan is read or replayed."""
-    run = subprocess.run(
-        [sys.executable, str(BENCHMARKS / "robustness.py"), str(tmp_path), "--timestep", value],
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    run = run_script("robustness.py", str(tmp_path), "--timestep", value)
     assert run.returncode == 2
     assert [line for line in run.stderr.splitlines() if "error:" in line] == [
         f"robustness.py: error: argument --timestep: must be within [0.0001, 0.02] s, got {value}"
