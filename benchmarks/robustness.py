@@ -47,9 +47,12 @@ def check(job: tuple[str, list[float], int, float | None]) -> dict:
 
 def timestep(text: str) -> float:
     """A physics step [s] inside the task schema's range, checked before any replay."""
+    from bilba_dist.task.schema import TIMESTEP_RANGE_S
+
+    low, high = TIMESTEP_RANGE_S
     value = float(text)
-    if not 1e-4 <= value <= 0.02:
-        raise argparse.ArgumentTypeError(f"must be within [0.0001, 0.02] s, got {text}")
+    if not low <= value <= high:
+        raise argparse.ArgumentTypeError(f"must be within [{low:g}, {high:g}] s, got {text}")
     return value
 
 

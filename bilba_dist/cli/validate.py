@@ -11,6 +11,7 @@ from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import success_map, validate_plan
 from bilba_dist.task.loader import parse_axis_items, with_friction, with_planner
+from bilba_dist.task.schema import TIMESTEP_RANGE_S
 
 
 @click.command("validate")
@@ -26,7 +27,7 @@ from bilba_dist.task.loader import parse_axis_items, with_friction, with_planner
 @click.option("--friction-scale", type=Bounded(0.01, 10), default=1.0, show_default=True)
 @click.option(
     "--timestep",
-    type=Bounded(1e-4, 0.02),
+    type=Bounded(*TIMESTEP_RANGE_S),
     help="Replay at this physics time step [s], e.g. 0.002 to check a plan in a finer "
     "simulation than it was planned in [default: the plan's].",
 )

@@ -36,6 +36,8 @@ MAX_OFFSET_RAD = math.pi / 4
 MAX_PARTICLES = 256
 #: The longest one compliant motion may run [s] (task files and plan files).
 MAX_MOTION_TIMEOUT_S = 60.0
+#: The physics time steps a task (or `bilba validate --timestep`) may ask for [s].
+TIMESTEP_RANGE_S = (1e-4, 0.02)
 
 
 class Strict(BaseModel):
@@ -249,7 +251,7 @@ class PlannerParams(Strict):
     # PyBullet at 240 Hz (docs/physics.md: 500/1000 Hz gave the same outcomes at 2×/4× the
     # cost);
     # the authors used 0.005 s in Drake.
-    sim_timestep_s: float = Field(default=1 / 240, ge=1e-4, le=0.02)
+    sim_timestep_s: float = Field(default=1 / 240, ge=TIMESTEP_RANGE_S[0], le=TIMESTEP_RANGE_S[1])
     # Panda: move the joint reference through IK waypoints on the hand's straight line
     # (ours; off = a straight line in joint space, which bows the hand ~2 mm on an 8 cm
     # move). docs/physics.md.
