@@ -10,12 +10,17 @@ every CPU first, so Numba's cache load and Ray's worker start-up are paid before
 ``--parallel`` problems run at once (each search still has a CPU of its own: keep
 ``parallel * max(ns)`` within ``--cpus``). With ``--search-actors K`` each search runs its
 rollouts on K actors of its own (`bilba plan --portfolio N --search-actors K`), N × K CPUs.
-Prints each problem; for each N, its mean and median time to the first plan over
-N = 1's, beside the median of the per-problem ratios (about 1 for any two independent
-searches: the second seed is the slower on half the problems); and the time to the first
-plan expected from N = 2, 8, 16, 64 seeds by order statistics over the N = 1 times (draws
-with replacement from their empirical distribution: the expectation can only reach the
-fastest seed measured, so more problems sharpen it). Ends with one JSON line.
+``--splits 16x1 4x4 1x16`` compares ways of spending the same CPUs on one problem instead:
+NxC is N searches of C CPUs each (C = 1: rollouts in the search's process; C > 1: on C
+actors of its own), every split of a problem with the same first seeds, back to back; the
+first split is the baseline of the ratios.
+Prints each problem; for each arm, its mean and median time to the first plan over the
+baseline's (N = 1), beside the median of the per-problem ratios (about 1 for any two
+independent searches: the second seed is the slower on half the problems); and, when the
+baseline is one search of one CPU, the time to the first plan expected from N = 2, 8, 16, 64
+seeds by order statistics over its times (draws with replacement from their empirical
+distribution: the expectation can only reach the fastest seed measured, so more problems
+sharpen it). Ends with one JSON line.
 """
 
 import argparse
@@ -54,10 +59,24 @@ def timed(
     return time.perf_counter() - start, found.winner
 
 
-def problem(task, variant: str, p: int, ns: list[int], timeout: float, actors: int) -> dict:
+def split(text: str) -> tuple[int, int]:
+    """``NxC``: N searches of C CPUs each, both 1 or more."""
+    searches, sep, cpus = text.lower().partition("x")
+    if not sep:
+        raise argparse.ArgumentTypeError(f"must be NxC (searches x CPUs a search), got {text!r}")
+    return at_least_one(searches), at_least_one(cpus)
+
+
+def label(arm: tuple[int, int]) -> str:
+    return f"{arm[0]}x{arm[1]}"
+
+
+def problem(task, variant: str, p: int, arms: list[tuple[int, int]], timeout: float) -> dict:
     row: dict = {"problem": p}
-    for n in ns:
-        row[f"n{n}_s"], row[f"n{n}_winner"] = timed(
+    for n, cpus in arms:
+        actors = cpus if cpus > 1 else 0
+        key = label((n, cpus))
+        row[f"{key}_s"], row[f"{key}_winner"] = timed(
             task, variant, [p + 1000 * k for k in range(n)], timeout, actors
         )
     return row
@@ -72,20 +91,25 @@ def main() -> None:
     parser.add_argument("--cpus", type=at_least_one, default=2)
     parser.add_argument("--parallel", type=at_least_one, default=1)
     parser.add_argument("--search-actors", type=count, default=0)
+    parser.add_argument("--splits", type=split, nargs="+")
     args = parser.parse_args()
-    ns = sorted(set(args.ns) | {1})
-    per_search = max(args.search_actors, 1)
-    if args.parallel * max(ns) * per_search > args.cpus:
+    if args.splits:
+        arms = list(dict.fromkeys(args.splits))
+    else:  # one search of the same kind first: the baseline
+        per_search = max(args.search_actors, 1)
+        arms = [(n, per_search) for n in sorted(set(args.ns) | {1})]
+    widest = max(arms, key=lambda arm: arm[0] * arm[1])
+    if args.parallel * widest[0] * widest[1] > args.cpus:
         parser.error(
-            f"--parallel {args.parallel} × N {max(ns)} × {per_search} CPUs a search needs more "
-            f"than {args.cpus} CPUs"
+            f"--parallel {args.parallel} × N {widest[0]} × {widest[1]} CPUs a search needs "
+            f"more than {args.cpus} CPUs"
         )
     name, bound, variant = SETTINGS[args.setting]
     task = load_task(name, [bound])
     print(
         f"# {platform.node()}, {os.cpu_count()} CPUs; {args.setting}; Ray with {args.cpus} "
-        f"CPUs; N = {ns}; {args.parallel} problem(s) at a time; "
-        f"{args.search_actors or 'no'} rollout actors a search"
+        f"CPUs; searches x CPUs a search: {', '.join(map(label, arms))}; {args.parallel} "
+        "problem(s) at a time"
     )
     rows = []
     with ray_session(args.cpus, None):
@@ -94,42 +118,46 @@ def main() -> None:
             list(pool.map(lambda seed: timed(task, variant, [seed], 5.0), warm))
         with ThreadPoolExecutor(args.parallel) as pool:
             for row in pool.map(
-                lambda p: problem(task, variant, p, ns, args.timeout, args.search_actors),
-                range(args.problems),
+                lambda p: problem(task, variant, p, arms, args.timeout), range(args.problems)
             ):
                 rows.append(row)
                 cells = "   ".join(
-                    f"N={n} {row[f'n{n}_s']:6.1f} s (seed {row[f'n{n}_winner']})" for n in ns
+                    f"{label(arm)} {row[f'{label(arm)}_s']:6.1f} s "
+                    f"(seed {row[f'{label(arm)}_winner']})"
+                    for arm in arms
                 )
                 print(f"problem {row['problem']}: {cells}", flush=True)
-    singles = [r["n1_s"] for r in rows]
+    base = label(arms[0])
+    singles = [r[f"{base}_s"] for r in rows]
     figures: dict = {
         "setting": args.setting,
         "problems": len(rows),
         "cpus": args.cpus,
         "parallel": args.parallel,
-        "search_actors": args.search_actors,
-        "median_n1_s": round(statistics.median(singles), 2),
-        "mean_n1_s": round(statistics.mean(singles), 2),
+        "baseline": base,
+        f"median_{base}_s": round(statistics.median(singles), 2),
+        f"mean_{base}_s": round(statistics.mean(singles), 2),
     }
-    for n in ns[1:]:
-        times = [r[f"n{n}_s"] for r in rows]
+    for arm in arms[1:]:
+        key = label(arm)
+        times = [r[f"{key}_s"] for r in rows]
         mean = statistics.mean(times)
-        figures[f"median_n{n}_s"] = round(statistics.median(times), 2)
-        figures[f"mean_n{n}_s"] = round(mean, 2)
-        figures[f"mean_ratio_n{n}_n1"] = round(mean / statistics.mean(singles), 3)
-        ratio = statistics.median(r[f"n{n}_s"] / r["n1_s"] for r in rows)
-        figures[f"median_ratio_n{n}_n1"] = round(ratio, 3)
+        figures[f"median_{key}_s"] = round(statistics.median(times), 2)
+        figures[f"mean_{key}_s"] = round(mean, 2)
+        figures[f"mean_ratio_{key}"] = round(mean / statistics.mean(singles), 3)
+        ratio = statistics.median(r[f"{key}_s"] / r[f"{base}_s"] for r in rows)
+        figures[f"median_ratio_{key}"] = round(ratio, 3)
         print(
-            f"N={n} / N=1: mean time {figures[f'mean_ratio_n{n}_n1']:.3f}, median time "
-            f"{figures[f'median_n{n}_s'] / figures['median_n1_s']:.3f}, median of the "
+            f"{key} / {base}: mean time {figures[f'mean_ratio_{key}']:.3f}, median time "
+            f"{figures[f'median_{key}_s'] / figures[f'median_{base}_s']:.3f}, median of the "
             f"per-problem ratios {ratio:.3f}"
         )
-    figures.update(
-        {f"expected_n{n}_s": round(expected_min(singles, n), 2) for n in (1, 2, 8, 16, 64)}
-    )
-    expected = ", ".join(f"N={n} {figures[f'expected_n{n}_s']} s" for n in (1, 2, 8, 16, 64))
-    print(f"expected time to the first plan (order statistics of the N=1 times): {expected}")
+    if arms[0][0] == 1:
+        figures.update(
+            {f"expected_n{n}_s": round(expected_min(singles, n), 2) for n in (1, 2, 8, 16, 64)}
+        )
+        expected = ", ".join(f"N={n} {figures[f'expected_n{n}_s']} s" for n in (1, 2, 8, 16, 64))
+        print(f"expected time to the first plan (order statistics of the {base} times): {expected}")
     print(json.dumps(figures))
 
 

@@ -152,6 +152,17 @@ def test_compact_belief_refuses_an_alpha_outside_0_to_8_in_one_line():
             ["--search-actors", "-1"],
             "argument --search-actors: must be 0 or more, got -1",
         ),
+        (
+            "portfolio.py",
+            ["--splits", "2x2", "8x1", "1x16", "--cpus", "8"],
+            "--parallel 1 × N 1 × 16 CPUs a search needs more than 8 CPUs",
+        ),
+        (
+            "portfolio.py",
+            ["--splits", "4"],
+            "argument --splits: must be NxC (searches x CPUs a search), got '4'",
+        ),
+        ("portfolio.py", ["--splits", "0x4"], "argument --splits: must be 1 or more, got 0"),
     ],
 )
 def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script, args, error):
