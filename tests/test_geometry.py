@@ -76,6 +76,11 @@ def test_name_map_names_faces_by_normal():
     assert np.allclose(cube.face("c/top").normal, [0, 0, 1])
     assert np.allclose(cube.face("c/left").normal, [-1, 0, 0])
     assert sum(f.name.startswith("c/f") for f in cube.faces) == 4
+    huge = convex_piece(
+        "c", CUBE, pin.SE3.Identity(), {"right": [1e308, 0, 0], "far": [0, 0, -9e307]}
+    )
+    assert np.allclose(huge.face("c/right").normal, [1, 0, 0])  # no norm of 1e308 overflows
+    assert np.allclose(huge.face("c/far").normal, [0, 0, -1])
 
 
 def test_pose_moves_vertices_and_face_planes():
@@ -110,6 +115,8 @@ def test_faces_at_names_every_face_through_a_point(point, faces):
         ([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], None, "degenerate"),
         ([[0, 0, 0], [1, 0, 0], [0, 1, 0]], None, "at least 4"),
         (CUBE, {"slanted": [1, 1, 0]}, "no facet has the normal"),
+        (CUBE, {"slanted": [1e308, 1e308, 0]}, r"no facet has the normal \[0.7071, 0.7071, 0.0\]"),
+        (CUBE, {"nowhere": [0, 0, 0]}, "nonzero 3-vector"),
         (CUBE, {"a": [1, 0, 0], "b": [1, 0, 0]}, "name the same facet"),
         (CUBE, {"f5": [1, 0, 0]}, "share a name"),
     ],

@@ -71,6 +71,14 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
     ),
     "mass 1 t": (edited("name: peg\n  pieces:", "name: peg\n  mass: 1000\n  pieces:"), "mass"),
     "huge file": (PEG + "#" * (3 * 2**20) + "\n", "byte limit"),
+    "5000-digit friction": (
+        edited("friction: 0.45", "friction: " + "9" * 5000),
+        "not valid YAML: Exceeds the limit (4300 digits)",
+    ),
+    "angle in words": (
+        edited("rpy: [180deg, 0, 0]}       # X_GM", "rpy: [half, 0, 0]}       # X_GM"),
+        "cannot read 'half' as an angle",
+    ),
 }
 
 

@@ -87,6 +87,13 @@ BAD = {
         {},
         "not a closed|no volume",
     ),
+    "millimetres read as metres": (hexagonal_peg_mm(), {"scale": 1.0}, "reach 75 m .*scale right"),
+    "coordinates near the float limit": (
+        hexagonal_peg_mm().apply_scale(1e300),
+        {"file": "part.obj"},
+        "reach 7.5e\\+298 m .*beyond the ±2 m",
+    ),
+    "scale near the float limit": (hexagonal_peg_mm(), {"scale": 1e308}, "reach far from"),
     "non-convex": (
         trimesh.creation.annulus(r_min=10.0, r_max=30.0, height=100.0),
         {},

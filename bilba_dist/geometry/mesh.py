@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from bilba_dist.errors import GeometryError
+from bilba_dist.task.units import WORKSPACE_M
 
 #: A mesh is convex when its volume is within this fraction of its convex hull's.
 CONVEX_VOLUME_TOL = 1e-3
@@ -18,6 +19,7 @@ CONVEX_VOLUME_TOL = 1e-3
 MAX_MESH_BYTES = 50 * 2**20
 
 
+@np.errstate(all="ignore")  # a file's overflows are checked below, not printed as warnings
 def mesh_vertices(path: Path, scale: float) -> np.ndarray:
     """The corners of the convex hull of the closed, convex mesh in ``path``, times
     ``scale`` [m]; any problem is one GeometryError naming the file."""
@@ -38,6 +40,16 @@ def mesh_vertices(path: Path, scale: float) -> np.ndarray:
         raise GeometryError(f"mesh {path}: holds no triangles (one closed surface expected)")
     if not np.isfinite(mesh.vertices).all():
         raise GeometryError(f"mesh {path}: has vertices that are not finite numbers")
+    reach = float(np.abs(mesh.vertices).max() * scale)
+    if not reach <= WORKSPACE_M:
+        shown = f"{reach:g} m" if np.isfinite(reach) else "far"
+        raise GeometryError(
+            f"mesh {path}: times scale {scale:g} its points reach {shown} from the piece's "
+            f"frame, beyond the ±{WORKSPACE_M:g} m of a task; is the scale right (0.001 for "
+            "a file in millimetres)?"
+        )
+    original, mesh = mesh, mesh.copy()
+    mesh.apply_scale(scale)  # the checks below in metres: cubes of file units can overflow
     if not mesh.is_watertight:
         raise GeometryError(
             f"mesh {path}: not a closed (watertight, manifold) surface; repair it, e.g. "
@@ -52,4 +64,4 @@ def mesh_vertices(path: Path, scale: float) -> np.ndarray:
             f"mesh {path}: not convex (its hull is {share:.1f} % empty); split it into convex "
             "parts, e.g. `coacd -i PART -o parts.obj`, and give each its own mesh piece"
         )
-    return np.asarray(mesh.convex_hull.vertices, dtype=float) * scale
+    return np.asarray(original.convex_hull.vertices, dtype=float) * scale

@@ -144,8 +144,9 @@ def _name_faces(
     named: dict[int, str] = {}
     for label, direction in face_names.items():
         d = np.asarray(direction, dtype=float)
-        if d.shape != (3,) or np.linalg.norm(d) == 0:
+        if d.shape != (3,) or not np.isfinite(d).all() or not np.abs(d).max() > 0:
             raise GeometryError(f"piece {piece!r}: face {label!r} needs a nonzero 3-vector normal")
+        d = d / np.abs(d).max()  # first to the unit box: [1e308, 1e308, 0] has no finite norm
         d = d / np.linalg.norm(d)
         angles = [np.arccos(np.clip(f.normal @ d, -1, 1)) for f in faces]
         best = int(np.argmin(angles))

@@ -27,12 +27,13 @@ def parse_quantity(value: object, units: dict[str, float], kind: str) -> float:
         return float(value)
     if not isinstance(value, str):
         raise ValueError(f"expected a {kind} (number or string with unit), got {value!r}")
+    article = "an" if kind[0] in "aeiou" else "a"
     match = _QUANTITY.match(value)
     if match is None:
-        raise ValueError(f"cannot read {value!r} as a {kind}; write e.g. '2{next(iter(units))}'")
+        example = f"2{next(iter(units))}"
+        raise ValueError(f"cannot read {value!r} as {article} {kind}; write e.g. '{example}'")
     number, unit = float(match.group(1)), match.group(2)
     if unit and unit not in units:
-        article = "an" if kind[0] in "aeiou" else "a"
         allowed = ", ".join(sorted(units))
         raise ValueError(f"unit {unit!r} is not {article} {kind} unit; use one of {allowed}")
     return number * units[unit] if unit else number

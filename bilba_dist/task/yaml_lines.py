@@ -33,7 +33,10 @@ def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, in
             node = loader.get_single_node()
             if node is not None:  # indexed first: constructing flattens merge keys in place
                 _index(node, (), lines, source)
-            data = loader.construct_document(node) if node is not None else None
+            try:
+                data = loader.construct_document(node) if node is not None else None
+            except ValueError as exc:  # e.g. an integer of over 4300 digits
+                raise TaskError(f"{source}: not valid YAML: {str(exc).splitlines()[0]}") from None
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
