@@ -270,3 +270,52 @@ def test_the_installed_command_refuses_fast(case, tmp_path):
     assert time.perf_counter() - start < 5.0
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and fragment in done.stderr
     assert list(tmp_path.iterdir()) == [path]
+
+
+@pytest.fixture(scope="module")
+def plan_and_log(tmp_path_factory) -> Path:
+    """A folder with a real plan (p.json) and its log (l.mcap) of the default task."""
+    folder = tmp_path_factory.mktemp("outputs")
+    result = run_cli(
+        "plan", "peg-in-hole", "--workers", "0", "--out", str(folder / "p.json"),
+        "--log", str(folder / "l.mcap"),
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    return folder
+
+
+#: command (paths relative to the folder above) -> a fragment of the one line
+OVERWRITES = {
+    "logs plan l.mcap --out ./l.mcap": "--out l.mcap is the log",
+    "logs export l.mcap --out sub/../l.mcap": "is the log: writing it would destroy it",
+    "logs plot l.mcap --out l.mcap": "--out l.mcap is the log",
+    "logs recover l.mcap --out l.mcap": "--out l.mcap is the log",
+    "export p.json --target franky --out p.json": "--out p.json is the plan",
+    "plan peg-in-hole --workers 0 --out same.x --log same.x": "--out and --log name one file",
+    "plan task.yaml --workers 0 --out task.yaml": "--out task.yaml is the task file",
+    "plan task.yaml --workers 0 --out t.json --log ./task.yaml": "--log task.yaml is the task",
+    "logs plan l.mcap --out p.json/x.json": "p.json is a file, not a folder",
+}
+
+
+@pytest.mark.parametrize("command", OVERWRITES)
+def test_an_output_never_overwrites_what_the_command_reads(command, plan_and_log, monkeypatch):
+    """Refused in one line before any work; the files read are left byte for byte."""
+    monkeypatch.chdir(plan_and_log)
+    (plan_and_log / "task.yaml").write_text(PEG)
+    before = {name: (plan_and_log / name).read_bytes() for name in ("p.json", "l.mcap")}
+    start = time.perf_counter()
+    result = run_cli(*command.split())
+    assert_one_line_exit_2(result, OVERWRITES[command], time.perf_counter() - start)
+    assert {name: (plan_and_log / name).read_bytes() for name in before} == before
+    assert (plan_and_log / "task.yaml").read_text() == PEG
+    assert not (plan_and_log / "same.x").exists() and not (plan_and_log / "t.json").exists()
+
+
+def test_a_log_output_in_a_new_folder_is_written(plan_and_log, tmp_path):
+    """`logs plan/export --out` make their folder, as `plan --out` does."""
+    log = str(plan_and_log / "l.mcap")
+    assert run_cli("logs", "plan", log, "--out", str(tmp_path / "a" / "p.json")).exit_code == 0
+    assert (tmp_path / "a" / "p.json").read_bytes() == (plan_and_log / "p.json").read_bytes()
+    assert run_cli("logs", "export", log, "--out", str(tmp_path / "b" / "l.ndjson")).exit_code == 0
+    assert (tmp_path / "b" / "l.ndjson").read_text().count("\n") > 20

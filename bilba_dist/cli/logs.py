@@ -6,6 +6,7 @@ from pathlib import Path
 import click
 
 from bilba_dist.cli.errors import user_errors
+from bilba_dist.cli.outputs import make_folder, refuse_overwriting, write_output
 from bilba_dist.errors import BilbaError
 from bilba_dist.record import inspect
 from bilba_dist.record.inspect import mode_text
@@ -57,6 +58,7 @@ def summary(files: tuple[Path, ...]) -> None:
 @user_errors
 def plan_command(file: Path, out: Path | None) -> None:
     """The plan recorded in a log: byte for byte the planner's plan file."""
+    refuse_overwriting({"--out": out}, {"the log": file})
     log = read_log(file)
     if not log.messages.get("/plan"):
         raise BilbaError(f"{file}: the log holds no plan (the job did not finish)")
@@ -64,7 +66,7 @@ def plan_command(file: Path, out: Path | None) -> None:
     if out is None:
         sys.stdout.buffer.write(data)
     else:
-        out.write_bytes(data)
+        write_output(out, data)
 
 
 @logs.command("recover")
@@ -76,6 +78,8 @@ def plan_command(file: Path, out: Path | None) -> None:
 def recover_command(file: Path, out: Path | None) -> None:
     """Rewrite a truncated log into a valid one holding everything readable."""
     out = out or file.with_suffix(".recovered.mcap")
+    refuse_overwriting({"--out": out}, {"the log": file})
+    make_folder(out)
     kept = recover(file, out)
     click.echo(f"{out}: {kept} messages recovered")
 
@@ -98,6 +102,8 @@ def show(file: Path, step: int) -> None:
 def plot(file: Path, out: Path | None) -> None:
     """PNG: score and particle spread per transition, and the schedules as they evolved."""
     out = out or file.with_suffix(".png")
+    refuse_overwriting({"--out": out}, {"the log": file})
+    make_folder(out)
     inspect.plot(read_log(file), out)
     click.echo(f"{out}")
 
@@ -111,8 +117,9 @@ def plot(file: Path, out: Path | None) -> None:
 @user_errors
 def export(file: Path, fmt: str, out: Path | None) -> None:
     """Every message as JSON lines, or one CSV row per transition and particle."""
+    refuse_overwriting({"--out": out}, {"the log": file})
     text = inspect.export(read_log(file), fmt)
     if out is None:
         click.echo(text, nl=False)
     else:
-        out.write_text(text)
+        write_output(out, text)

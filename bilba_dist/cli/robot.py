@@ -9,6 +9,7 @@ import click
 
 from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import Bounded
+from bilba_dist.cli.outputs import refuse_overwriting, write_output
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.robot.drivers import DRIVER_NAMES, DRIVERS
@@ -62,17 +63,15 @@ def export(
     from bilba_dist.plans.execute import ee_offset_of
     from bilba_dist.plans.export import driver_motions, export_text
 
+    suffix = "-franka-ros.yaml" if target == "franka-ros" else f"-{target}.py"
+    out = out or plan_path.with_name(plan_path.stem + suffix)
+    refuse_overwriting({"--out": out}, {"the plan": plan_path})
     plan = read_plan(plan_path)
     if not plan.motions:
         raise BilbaError(f"{plan_path}: the plan has no motions to export")
     exported = driver_motions(plan, DRIVERS[target], ee_offset_of(plan, ee_offset))
     text = export_text(plan, exported, plan_path.name)
-    suffix = "-franka-ros.yaml" if target == "franka-ros" else f"-{target}.py"
-    out = out or plan_path.with_name(plan_path.stem + suffix)
-    try:
-        out.write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise BilbaError(f"{out}: cannot write: {exc.strerror or exc}") from None
+    write_output(out, text)
     for warning in exported.warnings:
         click.echo(f"warning: {warning}", err=True)
     driver = DRIVERS[target]

@@ -1,0 +1,52 @@
+"""Where sub-commands write. An output never overwrites a file the command reads (the task,
+the plan, the log) nor another of its outputs: that is refused in one line before any work.
+An output's folder is made, as `bilba plan --out` makes its own, and a path that cannot be
+written is one line, not a traceback."""
+
+import os
+from pathlib import Path
+
+from bilba_dist.errors import BilbaError
+
+
+def same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file (through links, `..` or hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one does not exist (yet)
+        return a.resolve() == b.resolve()
+
+
+def refuse_overwriting(outputs: dict[str, Path | None], inputs: dict[str, Path]) -> None:
+    """Raise when an output (``{option: path}``) is one of the ``inputs`` (``{what: path}``)
+    or another output."""
+    named = [(option, path) for option, path in outputs.items() if path is not None]
+    for i, (option, path) in enumerate(named):
+        for what, source in inputs.items():
+            if same_file(path, source):
+                raise BilbaError(f"{option} {path} is {what}: writing it would destroy it")
+        for other, earlier in named[:i]:
+            if same_file(path, earlier):
+                raise BilbaError(f"{other} and {option} name one file, {path}: give each its own")
+
+
+def make_folder(path: Path) -> None:
+    """Make the folder ``path`` goes in; one line when that cannot be done."""
+    if path.parent.exists() and not path.parent.is_dir():
+        raise BilbaError(f"{path}: {path.parent} is a file, not a folder")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise BilbaError(f"{path}: cannot make its folder: {exc.strerror or exc}") from None
+
+
+def write_output(path: Path, data: bytes | str) -> None:
+    """Write ``data`` to ``path`` (its folder made); one line when that fails."""
+    make_folder(path)
+    try:
+        if isinstance(data, bytes):
+            path.write_bytes(data)
+        else:
+            path.write_text(data, encoding="utf-8")
+    except OSError as exc:
+        raise BilbaError(f"{path}: cannot write: {exc.strerror or exc}") from None
