@@ -107,7 +107,7 @@ class Batch:
 def load_jobs(path: Path) -> Batch:
     """Read, validate and expand a jobs file; every task and setting is loaded here."""
     source = str(path)
-    data, lines = load_yaml_with_lines(read_text(path), source)
+    data, lines = load_yaml_with_lines(read_text(path, "jobs file"), source)
     if not isinstance(data, dict):
         raise BilbaError(f"{source}: a jobs file must be a YAML mapping at the top level")
     try:

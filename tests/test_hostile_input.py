@@ -2,6 +2,7 @@
 exit code 2, within 5 s, and nothing partial is written (no plan file, no log, no batch)."""
 
 import json
+import os
 import subprocess
 import sys
 import time
@@ -319,3 +320,27 @@ def test_a_log_output_in_a_new_folder_is_written(plan_and_log, tmp_path):
     assert (tmp_path / "a" / "p.json").read_bytes() == (plan_and_log / "p.json").read_bytes()
     assert run_cli("logs", "export", log, "--out", str(tmp_path / "b" / "l.ndjson")).exit_code == 0
     assert (tmp_path / "b" / "l.ndjson").read_text().count("\n") > 20
+
+
+@pytest.mark.parametrize(
+    ("command", "fragment"),
+    [
+        ("validate {} --workers 0", "not a regular file; a plan file is expected"),
+        ("export {} --target franky", "not a regular file; a plan file is expected"),
+        ("logs summary {}", "not a regular file, not an MCAP log"),
+        ("batch {} --out batch", "not a regular file; a jobs file is expected"),
+        ("plan {} --workers 0 --no-log", "not a regular file; a task file is expected"),
+    ],
+)
+def test_a_pipe_or_device_given_as_a_file_is_refused_before_it_is_read(
+    command, fragment, tmp_path, monkeypatch
+):
+    """A FIFO would block the open for ever, /dev/zero would be read until memory ran out."""
+    monkeypatch.chdir(tmp_path)
+    os.mkfifo("pipe")
+    start = time.perf_counter()
+    result = run_cli(*command.format("./pipe").split())
+    assert_one_line_exit_2(result, f"pipe: {fragment}", time.perf_counter() - start)
+    if os.path.exists("/dev/zero"):
+        result = run_cli(*command.format("/dev/zero").split())
+        assert result.exit_code == 2 and "/dev/zero: not a regular file" in result.stderr

@@ -1,6 +1,7 @@
 """Reading planning logs back: every message decoded, with one clear error for a bad file."""
 
 import json
+import stat
 from collections import defaultdict
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -42,6 +43,8 @@ class Log:
 
 def _open(path: Path) -> bytes:
     try:
+        if not stat.S_ISREG(path.stat().st_mode):  # /dev/zero never ends, a FIFO blocks
+            raise BilbaError(f"{path}: not a regular file, not an MCAP log")
         data = path.read_bytes()
     except OSError as exc:
         raise BilbaError(f"{path}: cannot read log: {exc.strerror or exc}") from None

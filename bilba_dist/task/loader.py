@@ -67,7 +67,7 @@ def builtin_tasks() -> dict[str, Path]:
 
 def resolve_task_path(name_or_path: str) -> Path:
     path = Path(name_or_path)
-    if path.is_file():
+    if path.exists() and not path.is_dir():  # a pipe or device too: read_text refuses it
         return path
     builtins = builtin_tasks()
     if name_or_path in builtins:

@@ -3,6 +3,7 @@ refuses, in one line and before building anything, what a careless or hostile fi
 bytes that are not UTF-8, a file too large, nesting too deep for the parser's recursion,
 aliases that expand past a bound ("billion laughs"), a key given twice."""
 
+import stat
 from pathlib import Path
 from typing import Any
 
@@ -111,12 +112,20 @@ def line_of(location: Location, lines: dict[Location, int]) -> int | None:
 
 
 def read_text(path: Path, what: str = "task file", limit: int = MAX_FILE_BYTES) -> str:
-    """The file's text, which must be UTF-8 and at most ``limit`` bytes."""
+    """The file's text, which must be a regular file, UTF-8 and at most ``limit`` bytes (a
+    device or a pipe is refused before it is opened: /dev/zero never ends, a FIFO blocks)."""
     try:
-        size = path.stat().st_size
-        if size > limit:
-            raise TaskError(f"{path}: {size} bytes, over the {limit} byte limit for a {what}")
-        data = path.read_bytes()
+        status = path.stat()
+        if not stat.S_ISREG(status.st_mode):
+            raise TaskError(f"{path}: not a regular file; a {what} is expected")
+        if status.st_size > limit:
+            raise TaskError(
+                f"{path}: {status.st_size} bytes, over the {limit} byte limit for a {what}"
+            )
+        with path.open("rb") as file:
+            data = file.read(limit + 1)  # a file growing while read stops at the limit too
+        if len(data) > limit:
+            raise TaskError(f"{path}: over the {limit} byte limit for a {what}")
     except OSError as exc:
         raise TaskError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
     try:
