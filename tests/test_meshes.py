@@ -68,6 +68,17 @@ def test_a_mesh_in_another_unit_and_folder_is_the_same_piece(hex_yaml, tmp_path)
     )
 
 
+def far_peg_obj() -> bytes:
+    """The hexagonal peg as OBJ text with coordinates near the float limit (written by hand:
+    trimesh's own scaling would overflow in the test)."""
+    mesh = hexagonal_peg_mm()
+    vertices = [
+        f"v {x * 1e300:.17g} {y * 1e300:.17g} {z * 1e300:.17g}" for x, y, z in mesh.vertices
+    ]
+    faces = [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in mesh.faces]
+    return "\n".join([*vertices, *faces, ""]).encode()
+
+
 def open_box() -> trimesh.Trimesh:
     box = trimesh.creation.box((60.0, 60.0, 150.0))
     return trimesh.Trimesh(box.vertices, box.faces[:-2])  # one side left open
@@ -89,7 +100,7 @@ BAD = {
     ),
     "millimetres read as metres": (hexagonal_peg_mm(), {"scale": 1.0}, "reach 75 m .*scale right"),
     "coordinates near the float limit": (
-        hexagonal_peg_mm().apply_scale(1e300),
+        far_peg_obj(),
         {"file": "part.obj"},
         "reach 7.5e\\+298 m .*beyond the ±2 m",
     ),
