@@ -2,12 +2,13 @@
 at other frictions.
 
     .venv/bin/python benchmarks/robustness.py BATCH_DIR [--seeds 0] [--held-out 14]
-        [--frictions 0.5 1 1.5] [--timestep S] [--jobs 2]
+        [--frictions 0.5 1 1.5] [--timestep S] [--draw 1] [--jobs 2]
 
 For each successful job of the batch (`bilba batch`; seed 0 by default) the plan file is read
 (the task it holds, or for a version-1 file the task of its name and bounds), and replayed
 on its planning particles plus ``--held-out`` particles drawn uniformly inside its bounds
-(seed 1, the same draw at every friction), with the task's friction scaled by each factor;
+(seed ``--draw``, 1 by default, the same draw at every friction), with the task's friction
+scaled by each factor;
 with ``--timestep``, at that physics step instead of the plan's (a plan should not depend on
 the step it was planned at).
 Prints one row per plan (the held-out fraction per friction) and ends with one JSON line:
@@ -22,14 +23,16 @@ import platform
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from planning import count  # benchmarks/planning.py
 
-def check(job: tuple[str, list[float], int, float | None]) -> dict:
+
+def check(job: tuple[str, list[float], int, float | None, int]) -> dict:
     from bilba_dist.plans.file import read_plan
     from bilba_dist.plans.replay import validate_plan
     from bilba_dist.task.loader import with_friction, with_planner
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
-    path, frictions, held_out, timestep = job
+    path, frictions, held_out, timestep, draw = job
     plan = read_plan(Path(path))
     task = plan.task()
     if timestep is not None:
@@ -38,7 +41,7 @@ def check(job: tuple[str, list[float], int, float | None]) -> dict:
     for scale in frictions:
         scaled = with_friction(task, scale)
         worker = RolloutWorker(scaled)
-        result = validate_plan(scaled, plan.motions, worker, held_out, seed=1)
+        result = validate_plan(scaled, plan.motions, worker, held_out, seed=draw)
         worker.close()
         row[f"x{scale:g}"] = round(result.held_out or 0.0, 3)
         row[f"planning_x{scale:g}"] = round(result.planning, 3)
@@ -63,6 +66,7 @@ def main() -> None:
     parser.add_argument("--held-out", type=int, default=14)
     parser.add_argument("--frictions", type=float, nargs="+", default=[0.5, 1.0, 1.5])
     parser.add_argument("--timestep", type=timestep, help="physics step [s] (default: the plan's)")
+    parser.add_argument("--draw", type=count, default=1, help="seed of the held-out draw")
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
     records = [json.loads(line) for line in (args.batch / "records.jsonl").open()]
@@ -72,8 +76,9 @@ def main() -> None:
         if r["status"] == "success" and r["seed"] in args.seeds
     )
     step = f"step {args.timestep} s" if args.timestep else "each plan's step"
+    step += f"; held-out draw seed {args.draw}"
     print(f"# {platform.node()}, {os.cpu_count()} CPUs; {len(plans)} plans of {args.batch}; {step}")
-    jobs = [(p, args.frictions, args.held_out, args.timestep) for p in plans]
+    jobs = [(p, args.frictions, args.held_out, args.timestep, args.draw) for p in plans]
     with ProcessPoolExecutor(args.jobs) as pool:
         rows = list(pool.map(check, jobs))
     keys = [f"x{f:g}" for f in args.frictions]
@@ -83,6 +88,7 @@ def main() -> None:
     summary = {
         "plans": len(rows),
         "timestep_s": args.timestep,
+        "draw": args.draw,
         "min": {k: min((r[k] for r in rows), default=None) for k in keys},
         "below_0.95": sum(any(r[k] < 0.95 for k in keys) for r in rows),
     }

@@ -174,6 +174,14 @@ def test_scaling_and_portfolio_refuse_counts_they_cannot_run_in_one_line(script,
     ]
 
 
+def test_robustness_refuses_a_negative_draw_seed_in_one_line(tmp_path):
+    run = run_script("robustness.py", str(tmp_path), "--draw", "-1")
+    assert run.returncode == 2
+    assert [line for line in run.stderr.splitlines() if "error:" in line] == [
+        "robustness.py: error: argument --draw: must be 0 or more, got -1"
+    ]
+
+
 @pytest.mark.parametrize("value", ["nan", "0.5", "0", "-0.004"])
 def test_robustness_refuses_a_time_step_outside_the_schemas_range_in_one_line(value, tmp_path):
     """Checked while parsing, before any plan is read or replayed."""
