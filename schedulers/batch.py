@@ -98,17 +98,41 @@ class Counts:
     elapsed_s: float = 0.0  # from submitting the first job to recording the last
 
 
+#: What every record holds, by type: a line without them is not a record of ours.
+RECORD_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "id": str, "task": str, "setting": str, "planner": str, "seed": int, "status": str,
+}  # fmt: skip
+#: ... and what a successful one holds besides.
+SUCCESS_FIELDS: dict[str, type | tuple[type, ...]] = {
+    "planning_time_s": (int, float), "rollouts": int,
+}  # fmt: skip
+
+
+def is_record(value: Any) -> bool:
+    """Whether ``value`` is a job record as ``run_batch`` writes it (an edited or damaged
+    line is not: `report` and `--resume` skip it, and `--resume` runs that job again)."""
+    if not isinstance(value, dict):
+        return False
+    fields = {**RECORD_FIELDS, **(SUCCESS_FIELDS if value.get("status") == "success" else {})}
+    return all(
+        isinstance(value.get(key), kind) and not isinstance(value.get(key), bool)
+        for key, kind in fields.items()
+    )
+
+
 def read_records(out: Path) -> list[dict[str, Any]]:
-    """The records in DIR, skipping a torn last line."""
+    """The records in DIR, skipping a torn last line and any line that is not a record."""
     path = out / RECORDS
     if not path.exists():
         return []
     records = []
-    for line in path.read_text(encoding="utf-8").splitlines():
+    for line in path.read_bytes().decode("utf-8", errors="replace").splitlines():
         try:
-            records.append(json.loads(line))
+            value = json.loads(line)
         except json.JSONDecodeError:
             continue
+        if is_record(value):
+            records.append(value)
     return records
 
 

@@ -112,7 +112,10 @@ def report(folder: Path, png: Path | None = None) -> tuple[str, Path]:
         raise BilbaError(f"{folder}: no {RECORDS} here; is it a `bilba batch --out` folder?")
     records = read_records(folder)
     if not records:
-        raise BilbaError(f"{folder / RECORDS}: no job records yet")
+        lines = (folder / RECORDS).read_bytes().count(b"\n")
+        plural = "s" if lines != 1 else ""
+        other = f" ({lines} line{plural}, none a job record of `bilba batch`)" if lines else ""
+        raise BilbaError(f"{folder / RECORDS}: no job records yet{other}")
     table = cells(records)
     png = png or folder / "report.png"
     try:

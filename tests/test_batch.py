@@ -74,6 +74,34 @@ def test_a_batch_without_workers_or_a_report_without_records_is_one_line_and_exi
     assert len(result.stderr.strip().splitlines()) == 1
 
 
+RECORD = {"id": "j", "task": "peg-in-hole", "setting": "x1", "planner": "bilba-fixed", "seed": 0}
+
+
+@pytest.mark.parametrize(
+    "line",
+    [
+        b"\xff\xfe not UTF-8",
+        b'{"a": 1}',
+        b"[1, 2]",
+        json.dumps(
+            {**RECORD, "status": "success", "planning_time_s": "NaN", "rollouts": 3}
+        ).encode(),
+        json.dumps({**RECORD, "seed": True, "status": "timeout"}).encode(),
+    ],
+)
+def test_a_damaged_or_edited_records_line_is_skipped_not_a_crash(line, tmp_path):
+    """`report` and `--resume` read only lines that are records as `run_batch` writes them."""
+    good = {**RECORD, "id": "k", "status": "success", "planning_time_s": 2.5, "rollouts": 76}
+    (tmp_path / RECORDS).write_bytes(line + b"\n" + json.dumps(good).encode() + b"\n")
+    assert read_records(tmp_path) == [good]
+    result = run("report", str(tmp_path))
+    assert result.exit_code == 0, result.output
+    assert "2.5" in result.output and "1/1" in result.output
+    (tmp_path / RECORDS).write_bytes(line + b"\n")
+    result = run("report", str(tmp_path))
+    assert result.exit_code == 2 and "(1 line, none a job record" in result.stderr
+
+
 def test_the_paper_grids_cover_its_whole_table():
     """Table 1: 8 peg settings × 2 BILBA variants × 5 seeds, B-EST on the same 8, 4 puzzle."""
     settings = {"pitch1", "pitch2", "pitch3", "pitch4", "x1", "x2", "y1", "y2"}
