@@ -296,6 +296,7 @@ OVERWRITES = {
     "plan task.yaml --workers 0 --out task.yaml": "--out task.yaml is the task file",
     "plan task.yaml --workers 0 --out t.json --log ./task.yaml": "--log task.yaml is the task",
     "logs plan l.mcap --out p.json/x.json": "p.json is a file, not a folder",
+    "graph task.yaml --dot ./task.yaml": "--dot task.yaml is the task file",
 }
 
 
