@@ -168,6 +168,25 @@ def _store(out: Path, job: Job, result: dict[str, Any]) -> dict[str, Any]:
     return record
 
 
+def open_batch_folder(out: Path, resume: bool) -> set[str]:
+    """The ids of the jobs recorded in ``out``, made and opened for appending; raises before
+    any job runs when ``out`` holds records and ``resume`` is off, or cannot be written (so no
+    result is lost to it). Calling it twice is harmless."""
+    recorded = {r["id"] for r in read_records(out)}
+    if recorded and not resume:
+        raise BilbaError(
+            f"{out} already holds {len(recorded)} job records; "
+            "add --resume to run only what is missing, or choose another --out"
+        )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / RECORDS).open("a").close()
+    except OSError as exc:
+        raise BilbaError(f"{out}: cannot write the batch there: {exc.strerror or exc}") from None
+    _drop_torn_line(out)
+    return recorded
+
+
 def run_batch(
     batch: Batch,
     out: Path,
@@ -181,14 +200,7 @@ def run_batch(
 
     from bilba_dist.schedulers.session import ray_session
 
-    recorded = {r["id"] for r in read_records(out)}
-    if recorded and not resume:
-        raise BilbaError(
-            f"{out} already holds {len(recorded)} job records; "
-            "add --resume to run only what is missing, or choose another --out"
-        )
-    out.mkdir(parents=True, exist_ok=True)
-    _drop_torn_line(out)
+    recorded = open_batch_folder(out, resume)
     todo = [job for job in batch.jobs if job.id not in recorded]
     counts = Counts(total=len(batch.jobs), skipped=len(batch.jobs) - len(todo))
     on_progress(counts)

@@ -74,6 +74,14 @@ def test_a_batch_without_workers_or_a_report_without_records_is_one_line_and_exi
     assert len(result.stderr.strip().splitlines()) == 1
 
 
+def test_a_batch_folder_that_cannot_be_written_is_one_line_before_any_job(tmp_path):
+    (tmp_path / "file").write_text("not a folder")
+    result = run("batch", str(SMOKE), "--workers", "1", "--out", str(tmp_path / "file" / "out"))
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.strip().splitlines()  # no progress bar before it
+    assert line.startswith("bilba: error: ") and "cannot write the batch there" in line
+
+
 RECORD = {"id": "j", "task": "peg-in-hole", "setting": "x1", "planner": "bilba-fixed", "seed": 0}
 
 
