@@ -87,7 +87,8 @@ EXIT_NO_PLAN = 1
     default=0,
     show_default=True,
     help="With --portfolio: run each search's rollouts on K Ray actors of its own (N × K "
-    "CPUs in all) instead of in the search's process.",
+    "CPUs in all) instead of in the search's process. On a 16-core node 2 × 8 or 4 × 4 "
+    "planned first (docs/cluster.md).",
 )
 @click.option(
     "--allow-start-contact",
