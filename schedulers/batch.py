@@ -100,7 +100,7 @@ class Counts:
 
 #: What every record holds, by type: a line without them is not a record of ours.
 RECORD_FIELDS: dict[str, type | tuple[type, ...]] = {
-    "id": str, "task": str, "setting": str, "planner": str, "seed": int, "status": str,
+    "task": str, "setting": str, "planner": str, "seed": int, "status": str,
 }  # fmt: skip
 #: ... and what a successful one holds besides.
 SUCCESS_FIELDS: dict[str, type | tuple[type, ...]] = {
@@ -172,7 +172,7 @@ def open_batch_folder(out: Path, resume: bool) -> set[str]:
     """The ids of the jobs recorded in ``out``, made and opened for appending; raises before
     any job runs when ``out`` holds records and ``resume`` is off, or cannot be written (so no
     result is lost to it). Calling it twice is harmless."""
-    recorded = {r["id"] for r in read_records(out)}
+    recorded = {r["id"] for r in read_records(out) if isinstance(r.get("id"), str)}
     if recorded and not resume:
         raise BilbaError(
             f"{out} already holds {len(recorded)} job records; "
