@@ -33,6 +33,9 @@ _EXPORTS = {
     "RayPool": "bilba_dist.workers.pool",
     "ray_session": "bilba_dist.schedulers.session",
     "rollout_backend": "bilba_dist.schedulers.session",
+    # one hard problem as N seeded searches side by side (`bilba plan --portfolio N`)
+    "run_portfolio": "bilba_dist.schedulers.portfolio",
+    "PortfolioResult": "bilba_dist.schedulers.portfolio",
     # plan files, replay, validation
     "plan_document": "bilba_dist.plans.file",
     "write_plan": "bilba_dist.plans.file",
@@ -55,6 +58,7 @@ __all__ = [
     "LogWriter",
     "PlanResult",
     "PlannedMotion",
+    "PortfolioResult",
     "Progress",
     "RayPool",
     "RolloutWorker",
@@ -71,6 +75,7 @@ __all__ = [
     "read_plan",
     "replay",
     "rollout_backend",
+    "run_portfolio",
     "validate_plan",
     "write_plan",
 ]
@@ -96,6 +101,7 @@ if TYPE_CHECKING:
     from bilba_dist.plans.replay import Validation, replay, validate_plan
     from bilba_dist.record.reader import read_log
     from bilba_dist.record.writer import LogWriter
+    from bilba_dist.schedulers.portfolio import PortfolioResult, run_portfolio
     from bilba_dist.schedulers.session import ray_session, rollout_backend
     from bilba_dist.task.loader import Task, load_task
     from bilba_dist.task.schema import TaskSpec
