@@ -7,7 +7,7 @@ import click
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
-from bilba_dist.cli.outputs import refuse_overwriting, write_output
+from bilba_dist.cli.outputs import refuse_overwriting, task_file, write_output
 from bilba_dist.geometry.contact import FREE
 from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.task.loader import load_task
@@ -20,8 +20,7 @@ from bilba_dist.task.loader import load_task
 @user_errors
 def graph(task: str, uncertainty: tuple[str, ...], dot: Path | None) -> None:
     """Print the modes, edges and contact schedule of TASK (a built-in name or a YAML path)."""
-    task_file = {"the task file": Path(task)} if Path(task).is_file() else {}
-    refuse_overwriting({"--dot": dot}, task_file)
+    refuse_overwriting({"--dot": dot}, task_file(task))
     loaded = load_task(task, split_uncertainty(uncertainty))
     particles = initial_belief(loaded)
     mode_graph, schedule = belief_graph(loaded, particles, loaded.X_WG0, SliceCache(loaded))

@@ -17,6 +17,11 @@ def same_file(a: Path, b: Path) -> bool:
         return a.resolve() == b.resolve()
 
 
+def task_file(task: str) -> dict[str, Path]:
+    """TASK as an input to protect: the task file when TASK names one, else nothing."""
+    return {"the task file": Path(task)} if Path(task).is_file() else {}
+
+
 def refuse_overwriting(outputs: dict[str, Path | None], inputs: dict[str, Path]) -> None:
     """Raise when an output (``{option: path}``) is one of the ``inputs`` (``{what: path}``)
     or another output."""

@@ -18,7 +18,7 @@ from bilba_dist.cli.options import (
     uncertainty_option,
     workers_option,
 )
-from bilba_dist.cli.outputs import refuse_overwriting
+from bilba_dist.cli.outputs import refuse_overwriting, task_file
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.result import PlanResult
@@ -130,8 +130,7 @@ def plan_command(
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
-    task_file = {"the task file": Path(task)} if Path(task).is_file() else {}
-    refuse_overwriting({"--out": out, "--log": None if no_log else log_path}, task_file)
+    refuse_overwriting({"--out": out, "--log": None if no_log else log_path}, task_file(task))
     if search_actors and portfolio == 1:
         raise BilbaError("--search-actors is for --portfolio N (2 or more); one plan on K "
                          "actors is --workers K")  # fmt: skip
