@@ -9,7 +9,8 @@ side by side (each N of ``--ns``), in one Ray session of ``--cpus`` CPUs (a warm
 every CPU first, so Numba's cache load and Ray's worker start-up are paid before timing).
 ``--parallel`` problems run at once (each search still has a CPU of its own: keep
 ``parallel * max(ns)`` within ``--cpus``). With ``--search-actors K`` each search runs its
-rollouts on K actors of its own (`bilba plan --portfolio N --search-actors K`), N × K CPUs.
+rollouts on K actors of its own (`bilba plan --portfolio N --search-actors K`), N × K CPUs
+(K = 1 runs in-process, as K = 0: one actor would only add Ray's cost a rollout).
 ``--splits 16x1 4x4 1x16`` compares ways of spending the same CPUs on one problem instead:
 NxC is N searches of C CPUs each (C = 1: rollouts in the search's process; C > 1: on C
 actors of its own), every split of a problem with the same first seeds, back to back; the
