@@ -48,20 +48,23 @@ def mesh_vertices(path: Path, scale: float) -> np.ndarray:
             f"frame, beyond the ±{WORKSPACE_M:g} m of a task; is the scale right (0.001 for "
             "a file in millimetres)?"
         )
-    original, mesh = mesh, mesh.copy()
-    mesh.apply_scale(scale)  # the checks below in metres: cubes of file units can overflow
     if not mesh.is_watertight:
         raise GeometryError(
             f"mesh {path}: not a closed (watertight, manifold) surface; repair it, e.g. "
             "with trimesh.repair or MeshLab"
         )
-    hull_volume = float(mesh.convex_hull.volume)
-    if abs(mesh.volume) <= 1e-12 * float(np.ptp(mesh.vertices, axis=0).max()) ** 3:
+    hull = mesh.convex_hull  # once, in file units: its corners are what is returned
+    # Volumes in metres: cubes of file units can overflow.
+    metres, hull_metres = mesh.copy(), hull.copy()
+    metres.apply_scale(scale)
+    hull_metres.apply_scale(scale)
+    volume, hull_volume = abs(metres.volume), float(hull_metres.volume)
+    if volume <= 1e-12 * float(np.ptp(metres.vertices, axis=0).max()) ** 3:
         raise GeometryError(f"mesh {path}: encloses no volume")
-    if abs(mesh.volume) < (1 - CONVEX_VOLUME_TOL) * hull_volume:
-        share = 100 * (1 - abs(mesh.volume) / hull_volume)
+    if volume < (1 - CONVEX_VOLUME_TOL) * hull_volume:
+        share = 100 * (1 - volume / hull_volume)
         raise GeometryError(
             f"mesh {path}: not convex (its hull is {share:.1f} % empty); split it into convex "
             "parts, e.g. `coacd -i PART -o parts.obj`, and give each its own mesh piece"
         )
-    return np.asarray(original.convex_hull.vertices, dtype=float) * scale
+    return np.asarray(hull.vertices, dtype=float) * scale
