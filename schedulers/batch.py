@@ -171,7 +171,7 @@ def _store(out: Path, job: Job, result: dict[str, Any]) -> dict[str, Any]:
 def open_batch_folder(out: Path, resume: bool) -> set[str]:
     """The ids of the jobs recorded in ``out``, made and opened for appending; raises before
     any job runs when ``out`` holds records and ``resume`` is off, or cannot be written (so no
-    result is lost to it). Calling it twice is harmless."""
+    result is lost to it)."""
     recorded = {r["id"] for r in read_records(out) if isinstance(r.get("id"), str)}
     if recorded and not resume:
         raise BilbaError(
@@ -250,16 +250,24 @@ def _error_line(exc: BaseException) -> dict[str, Any]:
 
 
 def progress_bar(total: int) -> tuple[Callable[[Counts], None], Callable[[], None]]:
-    """A tqdm bar showing done/running/failed; returns (update, close)."""
+    """A tqdm bar showing done/running/failed; returns (update, close). The bar appears at
+    the first update, so what `run_batch` refuses before its first progress is one line."""
     from tqdm import tqdm
 
-    bar = tqdm(total=total, unit=" jobs", file=sys.stderr, dynamic_ncols=True)
+    bars: list[tqdm] = []
 
     def update(counts: Counts) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit=" jobs", file=sys.stderr, dynamic_ncols=True))
+        bar = bars[0]
         bar.set_postfix_str(
             f"running {counts.running}, failed {counts.failed}, skipped {counts.skipped}",
             refresh=False,
         )
         bar.update(counts.skipped + counts.done - bar.n)
 
-    return update, bar.close
+    def close() -> None:
+        for bar in bars:
+            bar.close()
+
+    return update, close

@@ -35,14 +35,13 @@ def batch(
     jobs_file: Path, out: Path | None, resume: bool, workers: int, address: str | None
 ) -> None:
     """Run every job of a grid; one JSON-lines record, plan and MCAP log per finished job."""
-    from bilba_dist.schedulers.batch import open_batch_folder, progress_bar, run_batch
+    from bilba_dist.schedulers.batch import progress_bar, run_batch
     from bilba_dist.schedulers.jobs import load_jobs
 
     if workers < 1:
         raise BilbaError("--workers: a batch needs at least 1")
     grid = load_jobs(jobs_file)
     out = out or Path("batches") / grid.name
-    open_batch_folder(out, resume)  # its refusals before the progress bar: one line
     update, close = progress_bar(len(grid.jobs))
     try:
         counts = run_batch(grid, out, resume, workers, address, update)
