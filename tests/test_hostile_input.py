@@ -156,12 +156,21 @@ def test_hostile_numbers_on_the_command_line_are_refused(args, tmp_path):
 
 
 @pytest.fixture(scope="module")
-def plan_text(tmp_path_factory) -> str:
-    """A real plan of the default task (in-process), as its file's text."""
-    out = tmp_path_factory.mktemp("plan") / "p.json"
-    result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
+def plan_and_log(tmp_path_factory) -> Path:
+    """A folder with a real plan (p.json) and its log (l.mcap) of the default task."""
+    folder = tmp_path_factory.mktemp("outputs")
+    result = run_cli(
+        "plan", "peg-in-hole", "--workers", "0", "--out", str(folder / "p.json"),
+        "--log", str(folder / "l.mcap"),
+    )  # fmt: skip
     assert result.exit_code == 0, result.output
-    return out.read_text()
+    return folder
+
+
+@pytest.fixture(scope="module")
+def plan_text(plan_and_log) -> str:
+    """A real plan of the default task (in-process), as its file's text."""
+    return (plan_and_log / "p.json").read_text()
 
 
 def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
@@ -271,18 +280,6 @@ def test_the_installed_command_refuses_fast(case, tmp_path):
     assert time.perf_counter() - start < 5.0
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and fragment in done.stderr
     assert list(tmp_path.iterdir()) == [path]
-
-
-@pytest.fixture(scope="module")
-def plan_and_log(tmp_path_factory) -> Path:
-    """A folder with a real plan (p.json) and its log (l.mcap) of the default task."""
-    folder = tmp_path_factory.mktemp("outputs")
-    result = run_cli(
-        "plan", "peg-in-hole", "--workers", "0", "--out", str(folder / "p.json"),
-        "--log", str(folder / "l.mcap"),
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
-    return folder
 
 
 #: command (paths relative to the folder above) -> a fragment of the one line
