@@ -18,7 +18,7 @@ first split is the baseline of the ratios.
 Prints each problem; for each arm, its mean and median time to the first plan over the
 baseline's (N = 1), beside the median of the per-problem ratios (about 1 for any two
 independent searches: the second seed is the slower on half the problems); and, when the
-baseline is one search of one CPU, the time to the first plan expected from N = 2, 8, 16, 64
+baseline is one search (of any CPUs), the time to the first plan expected from N = 2, 8, 16, 64
 seeds by order statistics over its times (draws with replacement from their empirical
 distribution: the expectation can only reach the fastest seed measured, so more problems
 sharpen it). Ends with one JSON line.
