@@ -189,7 +189,7 @@ def test_a_map_that_cannot_be_written_is_refused_before_it_is_computed(
     args = ["--map", "grasp.x=1cm", "--map-out", str(out)]
     result = run_cli("validate", str(default_plan_file), "--workers", "0", *args)
     assert result.exit_code == 2, result.output
-    assert f"--map-out: cannot make {out.parent}" in result.stderr
+    assert f"bilba: error: {out}.csv: cannot make its folder" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
 
 

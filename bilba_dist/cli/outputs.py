@@ -36,13 +36,16 @@ def refuse_overwriting(outputs: dict[str, Path | None], inputs: dict[str, Path])
 
 
 def make_folder(path: Path) -> None:
-    """Make the folder ``path`` goes in; one line when that cannot be done."""
+    """Make the folder ``path`` goes in; one line when that cannot be done or the folder
+    cannot be written into (said before the work whose result goes there)."""
     if path.parent.exists() and not path.parent.is_dir():
         raise BilbaError(f"{path}: {path.parent} is a file, not a folder")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise BilbaError(f"{path}: cannot make its folder: {exc.strerror or exc}") from None
+    if not os.access(path.parent, os.W_OK):
+        raise BilbaError(f"{path}: cannot write into {path.parent}")
 
 
 def write_output(path: Path, data: bytes | str) -> None:

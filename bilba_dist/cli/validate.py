@@ -1,12 +1,12 @@
 """`bilba validate PLAN`: replay a plan on its planning belief and on held-out particles."""
 
-import os
 from pathlib import Path
 
 import click
 
 from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import SEED, Bounded, workers_option
+from bilba_dist.cli.outputs import make_folder
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import success_map, validate_plan
@@ -77,7 +77,7 @@ def validate(
     task = plan.task(task_name)
     csv, png = map_paths(map_out or plan_path.with_name(plan_path.stem + "-map"))
     if bounds:  # a folder the map cannot go into: said before its rollouts, not after
-        map_folder(csv.parent)
+        make_folder(csv)
     if friction_scale != 1.0:
         task = with_friction(task, friction_scale)
     if timestep is not None:
@@ -109,17 +109,6 @@ def validate(
             f"map:             {grid.success.mean():.3f} of {grid.success.size} over {axes} "
             f"-> {png}, {csv}"
         )
-
-
-def map_folder(folder: Path) -> None:
-    """Make the map's folder (as `bilba plan` makes its plan file's); one line if it cannot
-    be made or written into."""
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise BilbaError(f"--map-out: cannot make {folder}: {exc.strerror or exc}") from None
-    if not os.access(folder, os.W_OK):
-        raise BilbaError(f"--map-out: cannot write into {folder}")
 
 
 def map_paths(prefix: Path) -> tuple[Path, Path]:
