@@ -325,7 +325,7 @@ def test_a_log_output_in_a_new_folder_is_written(plan_and_log, tmp_path):
     [
         ("validate {} --workers 0", "not a regular file; a plan file is expected"),
         ("export {} --target franky", "not a regular file; a plan file is expected"),
-        ("logs summary {}", "not a regular file, not an MCAP log"),
+        ("logs summary {}", "not a regular file; a planning log (MCAP) is expected"),
         ("batch {} --out batch", "not a regular file; a jobs file is expected"),
         ("plan {} --workers 0 --no-log", "not a regular file; a task file is expected"),
     ],

@@ -1,7 +1,6 @@
 """Reading planning logs back: every message decoded, with one clear error for a bad file."""
 
 import json
-import stat
 from collections import defaultdict
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -14,6 +13,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from bilba_dist.errors import BilbaError
+from bilba_dist.files import read_bytes
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -42,12 +42,7 @@ class Log:
 
 
 def _open(path: Path) -> bytes:
-    try:
-        if not stat.S_ISREG(path.stat().st_mode):  # /dev/zero never ends, a FIFO blocks
-            raise BilbaError(f"{path}: not a regular file, not an MCAP log")
-        data = path.read_bytes()
-    except OSError as exc:
-        raise BilbaError(f"{path}: cannot read log: {exc.strerror or exc}") from None
+    data = read_bytes(path, "planning log (MCAP)")
     if not data:
         raise BilbaError(f"{path}: empty file, not an MCAP log")
     if not data.startswith(MAGIC):

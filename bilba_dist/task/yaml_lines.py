@@ -3,13 +3,13 @@ refuses, in one line and before building anything, what a careless or hostile fi
 bytes that are not UTF-8, a file too large, nesting too deep for the parser's recursion,
 aliases that expand past a bound ("billion laughs"), a key given twice."""
 
-import stat
 from pathlib import Path
 from typing import Any
 
 import yaml
 
 from bilba_dist.errors import TaskError
+from bilba_dist.files import read_bytes
 
 Location = tuple[str | int, ...]
 
@@ -114,20 +114,7 @@ def line_of(location: Location, lines: dict[Location, int]) -> int | None:
 def read_text(path: Path, what: str = "task file", limit: int = MAX_FILE_BYTES) -> str:
     """The file's text, which must be a regular file, UTF-8 and at most ``limit`` bytes (a
     device or a pipe is refused before it is opened: /dev/zero never ends, a FIFO blocks)."""
-    try:
-        status = path.stat()
-        if not stat.S_ISREG(status.st_mode):
-            raise TaskError(f"{path}: not a regular file; a {what} is expected")
-        if status.st_size > limit:
-            raise TaskError(
-                f"{path}: {status.st_size} bytes, over the {limit} byte limit for a {what}"
-            )
-        with path.open("rb") as file:
-            data = file.read(limit + 1)  # a file growing while read stops at the limit too
-        if len(data) > limit:
-            raise TaskError(f"{path}: over the {limit} byte limit for a {what}")
-    except OSError as exc:
-        raise TaskError(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    data = read_bytes(path, what, limit, TaskError)
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:

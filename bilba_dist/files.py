@@ -1,0 +1,27 @@
+"""Reading a file a user names: a regular file only (a device or a pipe is refused before it
+is opened: /dev/zero never ends, a FIFO blocks), at most ``limit`` bytes, and one line, not
+a traceback, when it cannot be read."""
+
+import stat
+from pathlib import Path
+
+from bilba_dist.errors import BilbaError
+
+
+def read_bytes(
+    path: Path, what: str, limit: int | None = None, error: type[BilbaError] = BilbaError
+) -> bytes:
+    """The bytes of ``path``, a ``what`` ("task file"), raising ``error`` in one line."""
+    try:
+        status = path.stat()
+        if not stat.S_ISREG(status.st_mode):
+            raise error(f"{path}: not a regular file; a {what} is expected")
+        if limit is not None and status.st_size > limit:
+            raise error(f"{path}: {status.st_size} bytes, over the {limit} byte limit for a {what}")
+        with path.open("rb") as file:
+            data = file.read() if limit is None else file.read(limit + 1)
+        if limit is not None and len(data) > limit:  # a file growing while read
+            raise error(f"{path}: over the {limit} byte limit for a {what}")
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
+    return data
