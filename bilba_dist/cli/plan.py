@@ -232,6 +232,8 @@ def plan_portfolio(
                 else ""
             )
         )
+    if output.get("verified") is False:
+        click.echo("verified   FAILED (out of time; the plan that held best): see its plan file")
     click.echo(f"plan file  {out}")
     if log_path is not None:
         click.echo(f"log        {log_path} (the winning search's)")
@@ -249,6 +251,10 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
         f"effort     {result.planning_time_s:.1f} s, {result.rollouts} rollouts, "
         f"{len(result.schedules)} schedules, {len(result.pruned)} edges pruned"
     )
+    check = result.verification
+    if check is not None and result.success:
+        how = "passed" if check.passed else "FAILED (out of time; the plan that held best)"
+        click.echo(f"verified   {how} on {check.text()} (plan {check.plans} of the search)")
     for k, m in enumerate(result.motions, 1):
         xyz = " ".join(f"{v:+.4f}" for v in m.G_d.translation)
         click.echo(f"motion {k:<3} to {m.contact}  G_d [{xyz}] m  score {m.score:.2f}")

@@ -33,9 +33,16 @@ from bilba_dist.planning.make_contact import (
     race,
 )
 from bilba_dist.planning.recorder import NullRecorder, Recorder
-from bilba_dist.planning.result import PlanResult
+from bilba_dist.planning.result import PlannedMotion, PlanResult
 from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import driver_fit, fixed_stiffness, variable_stiffness
+from bilba_dist.planning.verify import (
+    ADD_CHECKS,
+    verify,
+    verify_particles,
+    with_more_checks,
+    within_budget,
+)
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend, require_world
 from bilba_dist.task.loader import Task
@@ -91,7 +98,8 @@ def plan(
     search.on_progress = lambda contact, best: _show(progress, contact, best)
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
-        _attempts(task, graph, b0, search, rng, result, panda)
+        verifying = verify_particles(task, robust_friction(task))
+        _attempts(task, graph, b0, search, rng, result, panda, verifying)
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
@@ -102,6 +110,12 @@ def plan(
         )
     except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
+    if not result.success and result.unverified is not None:
+        # out of time (or schedules) after plans that failed verification: the best of them
+        plans = result.verification.plans if result.verification else 1
+        result.motions, result.verification = result.unverified
+        result.verification.plans, result.success = plans, True
+        result.reason = f"no plan passed verification ({result.reason}): the one that held best"
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
     if result.success and validate_on is not None:
@@ -215,6 +229,7 @@ def _attempts(
     rng: np.random.Generator,
     result: PlanResult,
     panda: PandaModel,
+    verifying: tuple[Particle, ...] = (),
 ) -> None:
     params = task.spec.planner
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
@@ -243,8 +258,13 @@ def _attempts(
             steps += outcome.steps
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
             if mode == task.goal:
+                motions = planned_motions(steps, b0, panda)
+                lost = _verify(task, motions, verifying, search, result) if verifying else []
+                if lost:
+                    b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
+                    break  # start over, checking particles this plan lost
                 result.success, result.reason = True, ""
-                result.motions = planned_motions(steps, b0, panda)
+                result.motions = motions
                 result.final_belief = belief
                 return
             graph.reweight(_positions(belief))
@@ -252,6 +272,33 @@ def _attempts(
         f"all {result.attempts} attempts failed ({len(result.pruned)} edges pruned); "
         f"last: {result.reason}"
     )
+
+
+def _verify(
+    task: Task,
+    motions: list[PlannedMotion],
+    particles: tuple[Particle, ...],
+    search: ContactSearch,
+    result: PlanResult,
+) -> list[Particle]:
+    """Verify a plan (planning/verify.py) on as many of the particles as ``verify_share``
+    of the search's rollouts allows; the particles it lost when it failed, else none."""
+    params = task.spec.planner
+    per_offset = 3 if robust_friction(task) > 0 else 1
+    budget = params.verify_share * search.evaluator.rollouts
+    chosen = within_budget(particles, per_offset, len(motions), budget)
+    verification, failed = verify(task, motions, chosen, search.evaluator)
+    plans = result.verification.plans + 1 if result.verification else 1
+    verification.plans = plans
+    result.verification = verification
+    search.recorder.verified(verification)
+    if verification.passed:
+        return []
+    best = result.unverified
+    if best is None or min(verification.held.values()) > min(best[1].held.values()):
+        result.unverified = (motions, verification)
+    result.reason = f"a plan failed verification on {verification.text()} (planner.verify_min)"
+    return failed
 
 
 def _next_contact(

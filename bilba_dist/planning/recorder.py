@@ -4,6 +4,7 @@ from typing import Protocol
 
 from bilba_dist.belief.state import Belief
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.planning.result import Verification
 from bilba_dist.rollout import Motion
 
 
@@ -27,6 +28,8 @@ class Recorder(Protocol):
         self, mode: ContactPair, training_size: int, predicted: float, simulated: float
     ) -> None: ...
 
+    def verified(self, verification: Verification) -> None: ...
+
 
 class NullRecorder:
     """Records nothing (``--no-log``)."""
@@ -41,4 +44,7 @@ class NullRecorder:
         pass
 
     def gp_round(self, *args: object, **kwargs: object) -> None:
+        pass
+
+    def verified(self, verification: Verification) -> None:
         pass

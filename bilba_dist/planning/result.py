@@ -26,9 +26,23 @@ class PlannedMotion:
 
 
 @dataclass
+class Verification:
+    """What the returned plan did on its verification particles."""
+
+    particles: int = 0  # verification particles it was replayed on
+    held: dict[float, float] = field(default_factory=dict)  # friction scale -> in the goal
+    passed: bool = True
+    plans: int = 0  # plans verified in the search, this one included
+
+    def text(self) -> str:
+        held = ", ".join(f"{v:.2f} at {k:g} μ" for k, v in self.held.items())
+        return f"{self.particles} particles, in the goal {held}"
+
+
+@dataclass
 class PlanResult:
     success: bool
-    reason: str  # "" on success; else why: no schedule, edges pruned, timeout, ...
+    reason: str  # "" on success (but a plan that failed verification); else why not
     motions: list[PlannedMotion]
     planner: str
     seed: int
@@ -41,12 +55,31 @@ class PlanResult:
     final_belief: Belief | None = None
     #: Each failed attempt at a contact, for the reason given when no plan is found.
     blocked: list[Blocked] = field(default_factory=list)
+    #: The returned plan's verification (None: off, or no plan); when the search ran out of
+    #: time with no plan that passed, the plan that held best, ``passed`` false.
+    verification: Verification | None = None
+    #: The best plan that failed verification so far, for a search that runs out of time.
+    unverified: tuple[list[PlannedMotion], Verification] | None = None
 
     def outcome(self) -> dict[str, Any]:
-        """Success, why not, time and rollouts: the log's /outcome and a batch record."""
+        """Success, why not, time, rollouts and whether the plan passed verification (None:
+        no plan, or verification off): the log's /outcome and a batch record."""
+        check = self.verification
         return {
             "success": self.success,
             "reason": self.reason,
             "planning_time_s": self.planning_time_s,
             "rollouts": self.rollouts,
+            "verified": check.passed if check is not None and self.success else None,
         }
+
+
+def verification_json(verification: Verification) -> dict[str, Any]:
+    """A verification as the log's /verify and the plan file's ``verification``: the held
+    fractions keyed by friction scale ("0.5")."""
+    return {
+        "particles": verification.particles,
+        "held": {f"{k:g}": v for k, v in verification.held.items()},
+        "passed": verification.passed,
+        "plan": verification.plans,
+    }

@@ -24,7 +24,7 @@ from bilba_dist import __version__
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_json, setpoint_json
-from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.planning.result import PlannedMotion, PlanResult, verification_json
 from bilba_dist.rollout import damping, is_symmetric_psd
 from bilba_dist.task.loader import Task, build_task, builtin_tasks, load_task
 from bilba_dist.task.schema import MAX_MOTION_TIMEOUT_S, TaskSpec
@@ -99,6 +99,9 @@ def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
         "reason": result.reason,
         "planning_time_s": round(result.planning_time_s, 3),
         "rollouts": result.rollouts,
+        "verification": (
+            verification_json(result.verification) if result.verification is not None else None
+        ),
         "motions": [_motion(m) for m in result.motions],
     }
 

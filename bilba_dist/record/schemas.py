@@ -96,6 +96,15 @@ TOPICS: dict[str, dict[str, Any]] = {
         },
         "bilba.GPRound",
     ),
+    "/verify": _object(
+        {
+            "particles": {"type": "integer"},
+            "held": {"type": "object", "additionalProperties": {"type": "number"}},
+            "passed": {"type": "boolean"},
+            "plan": {"type": "integer"},
+        },
+        "bilba.Verify",
+    ),
     "/plan": {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "bilba.Plan",
@@ -108,6 +117,7 @@ TOPICS: dict[str, dict[str, Any]] = {
             "reason": {"type": "string"},
             "planning_time_s": {"type": "number"},
             "rollouts": {"type": "integer"},
+            "verified": {"type": ["boolean", "null"]},
         },
         "bilba.Outcome",
     ),

@@ -22,6 +22,7 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_json, setpoint_json
+from bilba_dist.planning.result import Verification, verification_json
 from bilba_dist.record.foxglove import SCHEMAS as FOXGLOVE_SCHEMAS
 from bilba_dist.record.foxglove import SceneMessages
 from bilba_dist.record.schemas import TOPICS
@@ -179,6 +180,10 @@ class LogWriter:
                 "simulated_best": simulated,
             },
         )
+        self.commit()
+
+    def verified(self, verification: Verification) -> None:
+        self.write("/verify", verification_json(verification))
         self.commit()
 
     def finish(self, plan_text: str, outcome: dict[str, Any]) -> None:

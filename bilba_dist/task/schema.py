@@ -177,6 +177,7 @@ PAPER_PLANNER: dict[str, Any] = {
     "near_edge_m": 0.0,  # modes joined only where they share a vertex
     "setpoint_press_m": 0.003,  # "slightly inside" (the paper gives no figure)
     "check_friction": 0.0,  # plan at the task's friction, no check particles
+    "verify_particles": 0,  # return the first plan found
 }
 
 PRESETS: dict[str, dict[str, Any]] = {"default": {}, "paper": PAPER_PLANNER}
@@ -271,6 +272,16 @@ class PlannerParams(Strict):
     # ... and on this many more check particles drawn inside the pose bounds (a fixed draw),
     # each at friction x(1 - f), x1 and x(1 + f) (0: the planning particles' twins only).
     check_random: int = Field(default=0, ge=0, le=64)
+    # Verify a plan before returning it (ours; the authors: 0, off): replay it on this many
+    # offsets drawn inside the bounds (a fixed draw), each at friction x(1 - f), x1 and
+    # x(1 + f); one that brings fewer than verify_min of them to the goal at some friction is
+    # not returned, two of the particles it lost become check particles, and the search
+    # starts over. The replay spends at most verify_share of the search's rollouts so far
+    # (at least one offset). The puzzle's grasp.x ±1 cm plans then hold >= 0.9 of 14 held-out
+    # particles at 0.5, 1 and 1.5 μ (docs/planner.md, Verification).
+    verify_particles: int = Field(default=14, ge=0, le=256)
+    verify_min: float = Field(default=1.0, ge=0, le=1)
+    verify_share: float = Field(default=0.2, gt=0, le=100)
     # Plan within one Franka driver's form of stiffness and its limits (docs/drivers.md):
     # every candidate K is made what that driver can hold before it is simulated, so the plan
     # exports without approximation. "none": any symmetric PSD K (what franky takes).

@@ -1,0 +1,75 @@
+"""Verifying a plan before it is returned (``planner.verify_particles``, on by default).
+
+Robust acceptance checks each motion on the planning particles' twins at other frictions,
+but not at offsets between the planning particles, where a part on sub-millimetre gaps may
+drop either way (docs/planner.md, Verification). So a plan found is first replayed on
+particles it was not planned on: offsets drawn inside the bounds (a fixed draw), each at
+friction x(1 - f), x1 and x(1 + f). A plan that brings fewer than ``verify_min`` of them to
+the goal at some friction is not returned: up to ``ADD_CHECKS`` of the particles it failed
+become check particles, and the search starts over. The replay may spend at most
+``verify_share`` of the rollouts the search has spent so far, so an easy plan gets fewer
+particles (at least one offset) and a hard one all of them."""
+
+from bilba_dist.belief.particles import Particle, make_particle, random_offsets
+from bilba_dist.belief.start import start_belief
+from bilba_dist.belief.state import Belief
+from bilba_dist.planning.result import PlannedMotion, Verification
+from bilba_dist.rollout import RolloutBackend
+from bilba_dist.task.loader import Task
+
+#: The verification draw: neither the check particles' (7) nor `bilba validate`'s usual
+#: held-out draws (0, 1), so a held-out replay of a verified plan stays independent.
+VERIFY_SEED = 3
+
+#: How many of the particles a failed plan lost become check particles of the next search.
+ADD_CHECKS = 2
+
+
+def verify_particles(task: Task, friction_margin: float) -> tuple[Particle, ...]:
+    """``planner.verify_particles`` offsets drawn inside the bounds, each at friction
+    x(1 - f), x1 and x(1 + f) (x1 alone when f, robust acceptance's margin, is 0); in the
+    order of the offsets, so a prefix is the first offsets at every friction."""
+    f = friction_margin
+    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
+    drawn = random_offsets(bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED)
+    return tuple(
+        make_particle(task, {**o, "friction": scale} if f > 0 else o)
+        for o in drawn
+        for scale in ((-f, 0.0, f) if f > 0 else (0.0,))
+    )
+
+
+def within_budget(
+    particles: tuple[Particle, ...], per_offset: int, motions: int, budget: float
+) -> tuple[Particle, ...]:
+    """The first offsets (``per_offset`` particles each) whose replay of ``motions``
+    motions fits in ``budget`` rollouts; at least one offset."""
+    offsets = max(1, int(budget // max(1, per_offset * motions)))
+    return particles[: offsets * per_offset]
+
+
+def verify(
+    task: Task,
+    motions: list[PlannedMotion],
+    particles: tuple[Particle, ...],
+    backend: RolloutBackend,
+) -> tuple[Verification, list[Particle]]:
+    """Replay ``motions`` on ``particles``: the fraction in the goal at each friction, and
+    the particles that are not."""
+    from bilba_dist.plans.replay import replay
+
+    final = replay(task, motions, particles, backend)
+    ok = [task.goal in c for c in final.contacts]
+    by_friction: dict[float, list[bool]] = {}
+    for p, good in zip(particles, ok, strict=True):
+        by_friction.setdefault(round(p.friction_scale, 6), []).append(good)
+    held = {scale: sum(v) / len(v) for scale, v in sorted(by_friction.items())}
+    passed = min(held.values()) >= task.spec.planner.verify_min
+    failed = [p for p, good in zip(particles, ok, strict=True) if not good]
+    return Verification(len(particles), held, passed), failed
+
+
+def with_more_checks(task: Task, b0: Belief, extra: list[Particle]) -> Belief:
+    """``b0`` with ``extra`` particles added to its check particles, at their start."""
+    check = b0.check.particles if b0.check is not None else ()
+    return b0.with_check(start_belief(task, [*check, *extra]))
