@@ -89,7 +89,13 @@ def run_one(job: tuple[str, str, str, int, float, int]) -> dict:
 
     label, task_path, bound, seed, timeout, held_out = job
     task = load_task(task_path, [bound])
-    backend = RolloutWorker(task)
+    with RolloutWorker(task) as backend:
+        return _plan_and_check(label, task, backend, bound, seed, timeout, held_out)
+
+
+def _plan_and_check(
+    label: str, task, backend, bound: str, seed: int, timeout: float, held_out: int
+) -> dict:
     start = time.perf_counter()
     result = plan(task, backend, "bilba-variable", seed=seed, timeout_s=timeout)
     row = {

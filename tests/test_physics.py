@@ -350,3 +350,36 @@ def test_a_rollout_does_not_depend_on_what_its_world_ran_before():
     fresh.close()
     assert np.array_equal(after.state.q, alone.state.q)
     assert np.array_equal(after.state.X_WM.homogeneous, alone.state.X_WM.homogeneous)
+
+
+def test_a_worker_dropped_without_close_disconnects_its_worlds():
+    """Each world is a PyBullet connection (~33 MB); a RolloutWorker that is dropped without
+    close() must not keep them until the process ends (a benchmark grew to 12 GB so)."""
+    import gc
+
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    worker = RolloutWorker(task, "floating")
+    clients = [worker.panda_sim(p.X_GM).client for p in initial_belief(task)]
+    clients.append(worker._floating_sim().client)
+    assert len(set(clients)) == 4 and all(p.isConnected(c) for c in clients)
+    del worker
+    gc.collect()
+    assert not any(p.isConnected(c) for c in clients)
+    with RolloutWorker(task) as worker:  # or closed at the end of a with block
+        client = worker.panda_sim(task.X_GM).client
+    assert not p.isConnected(client)
+
+
+def test_a_closed_world_never_disconnects_a_client_reused_after_it():
+    """PyBullet reuses a closed connection's id: closing twice (close(), then the drop)
+    must not close the world that got the id next."""
+    task = load_task("peg-in-hole")
+    first = RolloutWorker(task)
+    sim = first.panda_sim(task.X_GM)
+    first.close()
+    second = RolloutWorker(task)
+    client = second.panda_sim(task.X_GM).client
+    sim.close()
+    del sim, first
+    assert p.isConnected(client)
+    second.close()

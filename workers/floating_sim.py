@@ -25,7 +25,7 @@ from bilba_dist.workers.motion import (
     ramp_poses,
     ramp_steps,
 )
-from bilba_dist.workers.scene import EnvironmentBodies, connect, quat_xyzw
+from bilba_dist.workers.scene import EnvironmentBodies, OwnsClient, connect, quat_xyzw
 from bilba_dist.workers.settings import SimSettings
 from bilba_dist.workers.urdf import write_obj
 
@@ -58,7 +58,7 @@ def part_compound(part: Part, client: int) -> int:
         )
 
 
-class FloatingSim:
+class FloatingSim(OwnsClient):
     """A PyBullet world with the environment and the manipuland as one free body."""
 
     def __init__(self, task: Task, settings: SimSettings) -> None:
@@ -83,9 +83,6 @@ class FloatingSim:
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
         self.friction = 1.0  # the friction factor in force
-
-    def close(self) -> None:
-        p.disconnect(physicsClientId=self.client)
 
     def reset(self, X_WO: pin.SE3, X_WM: pin.SE3, V_WM: np.ndarray, friction: float = 1.0) -> None:
         """``friction``: the particle's scale factor (the floating model's mass is the

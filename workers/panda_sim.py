@@ -27,7 +27,7 @@ from bilba_dist.workers.motion import (
     ramp_poses,
     ramp_steps,
 )
-from bilba_dist.workers.scene import EnvironmentBodies, connect, paced
+from bilba_dist.workers.scene import EnvironmentBodies, OwnsClient, connect, paced
 from bilba_dist.workers.settings import SimSettings
 from bilba_dist.workers.urdf import PART_LINK, panda_with_part
 
@@ -61,7 +61,7 @@ class JointImpedance:
         return cls(state_gains, ref_gains, J.T.copy(), s.spring_limit)
 
 
-class PandaSim:
+class PandaSim(OwnsClient):
     """A PyBullet world with the Panda holding the part at one grasp ``X_GM``."""
 
     def __init__(self, task: Task, X_GM: pin.SE3, settings: SimSettings) -> None:
@@ -99,9 +99,6 @@ class PandaSim:
         info = p.getDynamicsInfo(self.robot, self.part_link, physicsClientId=self.client)
         self.inertia = tuple(info[2])  # the part's local inertia diagonal, from the URDF
         self.physics = (1.0, 1.0)  # friction and mass factors in force
-
-    def close(self) -> None:
-        p.disconnect(physicsClientId=self.client)
 
     def _set_physics(self, friction: float, mass: float) -> None:
         """The particle's friction and mass factors. The part's inertia is scaled with its

@@ -114,6 +114,12 @@ class RolloutWorker:
         """The process simulating (a Ray actor's worker process: tests kill it)."""
         return os.getpid()
 
+    def __enter__(self) -> "RolloutWorker":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
     def close(self) -> None:
         for sim in self._panda.values():
             sim.close()

@@ -38,6 +38,27 @@ def connect(timestep_s: float, gravity: float, gui: bool = False) -> int:
     return client
 
 
+class OwnsClient:
+    """A world's own PyBullet connection (``self.client``, from `connect`), closed once: by
+    ``close()``, or when the world is dropped without it. A dropped world used to keep its
+    connection (~33 MB) until the process ended: a benchmark that made a RolloutWorker per
+    plan and never closed it grew to 12 GB a process once verification gave each plan 14
+    more grasps (benchmarks/HISTORY.md, twenty-eighth session)."""
+
+    client: int = -1
+
+    def close(self) -> None:
+        if self.client >= 0:  # PyBullet reuses ids: never disconnect a stale one
+            p.disconnect(physicsClientId=self.client)
+            self.client = -1
+
+    def __del__(self) -> None:
+        try:  # noqa: SIM105 (at interpreter exit, contextlib may be torn down first)
+            self.close()
+        except Exception:  # ... and pybullet with it
+            pass
+
+
 def paced(step: Callable[[int], object], timestep_s: float) -> Callable[[int], None]:
     """``step`` slowed to real time (for the viewer: unpaced, a 5 s motion flashes by in a
     tenth of a second)."""
