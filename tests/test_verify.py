@@ -82,7 +82,7 @@ def test_a_plan_that_fails_verification_is_not_returned_while_time_is_left(monke
     result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=12)
     assert added[:1] == [lost]
     assert result.success and result.verification is not None
-    assert not result.verification.passed and result.verification.held == {1.0: 0.5}
+    assert not result.verification.passed and result.verification.held == {"1": 0.5}
     assert result.reason.startswith("no plan passed verification (")
     assert [m.G_d for m in result.motions] == [m.G_d for m in first.motions]
 
@@ -100,3 +100,16 @@ def test_a_verification_setting_out_of_range_is_one_line(tmp_path, peg_yaml, pla
     result = run_cli("plan", str(path), "--workers", "0", "--no-log")
     assert result.exit_code == 2 and words in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_with_a_friction_axis_the_verification_particles_draw_their_own_friction():
+    """Robust acceptance is off then (the particles span the friction the user gave), and the
+    verification particles are drawn on every axis, friction included: one fraction."""
+    task = load_task("peg-in-hole", ["grasp.pitch=2deg", "friction=30%"])
+    particles = verify_particles(task, 0.0)
+    frictions = [p.friction_scale for p in particles]
+    assert len(particles) == 14 and len(set(frictions)) == 14
+    assert all(0.7 <= f <= 1.3 for f in frictions)
+    result = plan(task, RolloutWorker(task), "bilba-fixed", seed=0)
+    assert result.success and result.verification is not None
+    assert list(result.verification.held) == ["all"]

@@ -287,7 +287,8 @@ def _verify(
     per_offset = 3 if robust_friction(task) > 0 else 1
     budget = params.verify_share * search.evaluator.rollouts
     chosen = within_budget(particles, per_offset, len(motions), budget)
-    verification, failed = verify(task, motions, chosen, search.evaluator)
+    by_friction = task.spec.uncertainty.get("friction", 0.0) <= 0
+    verification, failed = verify(task, motions, chosen, search.evaluator, by_friction)
     plans = result.verification.plans + 1 if result.verification else 1
     verification.plans = plans
     result.verification = verification

@@ -30,12 +30,16 @@ class Verification:
     """What the returned plan did on its verification particles."""
 
     particles: int = 0  # verification particles it was replayed on
-    held: dict[float, float] = field(default_factory=dict)  # friction scale -> in the goal
+    #: Fraction in the goal by friction scale ("0.5", "1", "1.5"), or "all" when the
+    #: uncertainty has a friction axis (its particles draw their own)
+    held: dict[str, float] = field(default_factory=dict)
     passed: bool = True
     plans: int = 0  # plans verified in the search, this one included
 
     def text(self) -> str:
-        held = ", ".join(f"{v:.2f} at {k:g} μ" for k, v in self.held.items())
+        held = ", ".join(
+            f"{v:.2f}" + ("" if k == "all" else f" at {k} μ") for k, v in self.held.items()
+        )
         return f"{self.particles} particles, in the goal {held}"
 
 
@@ -76,10 +80,10 @@ class PlanResult:
 
 def verification_json(verification: Verification) -> dict[str, Any]:
     """A verification as the log's /verify and the plan file's ``verification``: the held
-    fractions keyed by friction scale ("0.5")."""
+    fractions keyed by friction scale ("0.5") or "all"."""
     return {
         "particles": verification.particles,
-        "held": {f"{k:g}": v for k, v in verification.held.items()},
+        "held": dict(verification.held),
         "passed": verification.passed,
         "plan": verification.plans,
     }

@@ -53,17 +53,22 @@ def verify(
     motions: list[PlannedMotion],
     particles: tuple[Particle, ...],
     backend: RolloutBackend,
+    by_friction: bool = True,
 ) -> tuple[Verification, list[Particle]]:
-    """Replay ``motions`` on ``particles``: the fraction in the goal at each friction, and
-    the particles that are not."""
+    """Replay ``motions`` on ``particles``: the fraction in the goal at each friction scale
+    ("0.5", "1", "1.5"; "all" when not ``by_friction``: a friction axis of the uncertainty
+    draws its own), and the particles that are not."""
     from bilba_dist.plans.replay import replay
 
     final = replay(task, motions, particles, backend)
     ok = [task.goal in c for c in final.contacts]
-    by_friction: dict[float, list[bool]] = {}
+    groups: dict[float, list[bool]] = {}
     for p, good in zip(particles, ok, strict=True):
-        by_friction.setdefault(round(p.friction_scale, 6), []).append(good)
-    held = {scale: sum(v) / len(v) for scale, v in sorted(by_friction.items())}
+        groups.setdefault(round(p.friction_scale, 6) if by_friction else 0.0, []).append(good)
+    held = {
+        f"{scale:g}" if by_friction else "all": sum(v) / len(v)
+        for scale, v in sorted(groups.items())
+    }
     passed = min(held.values()) >= task.spec.planner.verify_min
     failed = [p for p, good in zip(particles, ok, strict=True) if not good]
     return Verification(len(particles), held, passed), failed
