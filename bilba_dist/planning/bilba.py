@@ -99,7 +99,7 @@ def plan(
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
-        _attempts(task, graph, b0, search, rng, result, panda, verifying)
+        _attempts(task, graph, b0, search, rng, result, panda, verifying, started)
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
@@ -115,7 +115,10 @@ def plan(
         plans = result.verification.plans if result.verification else 1
         result.motions, result.verification = result.unverified
         result.verification.plans, result.success = plans, True
-        result.reason = f"no plan passed verification ({result.reason}): the one that held best"
+        result.reason = (
+            f"no plan passed verification within {params.verify_effort:g}x the time of the "
+            f"first or the timeout ({result.reason}): the one that held best"
+        )
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
     if result.success and validate_on is not None:
@@ -230,6 +233,7 @@ def _attempts(
     result: PlanResult,
     panda: PandaModel,
     verifying: tuple[Particle, ...] = (),
+    started: float = 0.0,
 ) -> None:
     params = task.spec.planner
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
@@ -259,7 +263,9 @@ def _attempts(
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
             if mode == task.goal:
                 motions = planned_motions(steps, b0, panda)
-                lost = _verify(task, motions, verifying, search, result) if verifying else []
+                lost = (
+                    _verify(task, motions, verifying, search, result, started) if verifying else []
+                )
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
                     break  # start over, checking particles this plan lost
@@ -280,6 +286,7 @@ def _verify(
     particles: tuple[Particle, ...],
     search: ContactSearch,
     result: PlanResult,
+    started: float,
 ) -> list[Particle]:
     """Verify a plan (planning/verify.py) on as many of the particles as ``verify_share``
     of the search's rollouts allows; the particles it lost when it failed, else none."""
@@ -288,6 +295,10 @@ def _verify(
     budget = params.verify_share * search.evaluator.rollouts
     chosen = within_budget(particles, per_offset, len(motions), budget)
     by_friction = task.spec.uncertainty.get("friction", 0.0) <= 0
+    if result.first_plan_s == 0.0:  # the search goes on for verify_effort x this at most
+        result.first_plan_s = search.clock() - started
+        limit = started + params.verify_effort * result.first_plan_s
+        search.deadline = min(search.deadline, limit)
     verification, failed = verify(task, motions, chosen, search.evaluator, by_friction)
     plans = result.verification.plans + 1 if result.verification else 1
     verification.plans = plans

@@ -282,6 +282,11 @@ class PlannerParams(Strict):
     verify_particles: int = Field(default=14, ge=0, le=256)
     verify_min: float = Field(default=1.0, ge=0, le=1)
     verify_share: float = Field(default=0.2, gt=0, le=100)
+    # ... and a search whose plans keep failing verification stops at this many times the
+    # time of its first plan (or the timeout, if sooner), returning the one that held best
+    # (else the puzzle's env.y ±1 cm, whose plans rarely pass, ran every search to its
+    # timeout).
+    verify_effort: float = Field(default=3.0, ge=1, le=1000)
     # Plan within one Franka driver's form of stiffness and its limits (docs/drivers.md):
     # every candidate K is made what that driver can hold before it is simulated, so the plan
     # exports without approximation. "none": any symmetric PSD K (what franky takes).
