@@ -233,7 +233,7 @@ def plan_portfolio(
             )
         )
     if output.get("verified") is False:
-        click.echo("verified   FAILED (out of time; the plan that held best): see its plan file")
+        click.echo("verified   FAILED (the plan that held best; none passed): see its plan file")
     click.echo(f"plan file  {out}")
     if log_path is not None:
         click.echo(f"log        {log_path} (the winning search's)")
@@ -253,7 +253,7 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
     )
     check = result.verification
     if check is not None and result.success:
-        how = "passed" if check.passed else "FAILED (out of time; the plan that held best)"
+        how = "passed" if check.passed else "FAILED (the plan that held best; none passed)"
         click.echo(f"verified   {how} on {check.text()} (plan {check.plans} of the search)")
     for k, m in enumerate(result.motions, 1):
         xyz = " ".join(f"{v:+.4f}" for v in m.G_d.translation)
