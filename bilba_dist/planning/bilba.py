@@ -291,15 +291,14 @@ def _verify(
     """Verify a plan (planning/verify.py) on as many of the particles as ``verify_share``
     of the search's rollouts allows; the particles it lost when it failed, else none."""
     params = task.spec.planner
-    per_offset = 3 if robust_friction(task) > 0 else 1
+    per_offset = 3 if robust_friction(task) > 0 else 1  # verify_particles: one a friction
     budget = params.verify_share * search.evaluator.rollouts
     chosen = within_budget(particles, per_offset, len(motions), budget)
-    by_friction = task.spec.uncertainty.get("friction", 0.0) <= 0
     if result.first_plan_s == 0.0:  # the search goes on for verify_effort x this at most
         result.first_plan_s = search.clock() - started
         limit = started + params.verify_effort * result.first_plan_s
         search.deadline = min(search.deadline, limit)
-    verification, failed = verify(task, motions, chosen, search.evaluator, by_friction)
+    verification, failed = verify(task, motions, chosen, search.evaluator)
     plans = result.verification.plans + 1 if result.verification else 1
     verification.plans = plans
     result.verification = verification

@@ -53,13 +53,13 @@ def verify(
     motions: list[PlannedMotion],
     particles: tuple[Particle, ...],
     backend: RolloutBackend,
-    by_friction: bool = True,
 ) -> tuple[Verification, list[Particle]]:
     """Replay ``motions`` on ``particles``: the fraction in the goal at each friction scale
-    ("0.5", "1", "1.5"; "all" when not ``by_friction``: a friction axis of the uncertainty
-    draws its own), and the particles that are not."""
+    ("0.5", "1", "1.5"; "all" when the uncertainty has a friction axis, whose draw gives
+    each particle its own), and the particles that are not."""
     from bilba_dist.plans.replay import replay
 
+    by_friction = task.spec.uncertainty.get("friction", 0.0) <= 0
     final = replay(task, motions, particles, backend)
     ok = [task.goal in c for c in final.contacts]
     groups: dict[float, list[bool]] = {}
