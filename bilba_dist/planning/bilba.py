@@ -263,9 +263,11 @@ def _attempts(
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
             if mode == task.goal:
                 motions = planned_motions(steps, b0, panda)
-                lost = (
-                    _verify(task, motions, verifying, search, result, started) if verifying else []
-                )
+                if result.first_plan_s == 0.0:  # go on for verify_effort x this at most
+                    result.first_plan_s = search.clock() - started
+                    limit = started + params.verify_effort * result.first_plan_s
+                    search.deadline = min(search.deadline, limit)
+                lost = _verify(task, motions, verifying, search, result) if verifying else []
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
                     break  # start over, checking particles this plan lost
@@ -286,7 +288,6 @@ def _verify(
     particles: tuple[Particle, ...],
     search: ContactSearch,
     result: PlanResult,
-    started: float,
 ) -> list[Particle]:
     """Verify a plan (planning/verify.py) on as many of the particles as ``verify_share``
     of the search's rollouts allows; the particles it lost when it failed, else none."""
@@ -294,10 +295,6 @@ def _verify(
     per_offset = 3 if robust_friction(task) > 0 else 1  # verify_particles: one a friction
     budget = params.verify_share * search.evaluator.rollouts
     chosen = within_budget(particles, per_offset, len(motions), budget)
-    if result.first_plan_s == 0.0:  # the search goes on for verify_effort x this at most
-        result.first_plan_s = search.clock() - started
-        limit = started + params.verify_effort * result.first_plan_s
-        search.deadline = min(search.deadline, limit)
     verification, failed = verify(task, motions, chosen, search.evaluator)
     plans = result.verification.plans + 1 if result.verification else 1
     verification.plans = plans
