@@ -23,6 +23,9 @@ class Cell:
     median_s: float | None  # over successful runs
     mad_s: float | None
     median_rollouts: float | None
+    #: Successful runs whose plan passed verification (planner.verify_particles); None when
+    #: no successful run says (verification off, or records from before it)
+    verified: int | None = None
 
 
 def cells(records: list[dict[str, Any]]) -> list[Cell]:
@@ -46,6 +49,11 @@ def cells(records: list[dict[str, Any]]) -> list[Cell]:
                 median_s=median,
                 mad_s=statistics.median(abs(t - median) for t in times) if times else None,
                 median_rollouts=statistics.median(r["rollouts"] for r in good) if good else None,
+                verified=(
+                    sum(r.get("verified") is True for r in good)
+                    if any(isinstance(r.get("verified"), bool) for r in good)
+                    else None
+                ),
             )
         )
     return table
@@ -54,7 +62,7 @@ def cells(records: list[dict[str, Any]]) -> list[Cell]:
 def format_table(table: list[Cell]) -> str:
     lines = [
         f"{'task':<14}{'setting':<12}{'planner':<16}{'time s (median ± MAD)':>22}"
-        f"{'success':>9}{'rollouts':>10}",
+        f"{'success':>9}{'verified':>10}{'rollouts':>10}",
     ]
     for c in table:
         if c.median_s is None:
@@ -62,11 +70,17 @@ def format_table(table: list[Cell]) -> str:
         else:
             time_text = f"{c.median_s:.1f} ± {c.mad_s:.1f}" + (" *" if c.timeouts else "")
         rollouts = f"{c.median_rollouts:.0f}" if c.median_rollouts is not None else "-"
+        verified = f"{c.verified}/{c.successes}" if c.verified is not None else "-"
         lines.append(
             f"{c.task:<14}{c.setting:<12}{c.planner:<16}{time_text:>22}"
-            f"{f'{c.successes}/{c.runs}':>9}{rollouts:>10}"
+            f"{f'{c.successes}/{c.runs}':>9}{verified:>10}{rollouts:>10}"
         )
     lines.append("* = some runs timed out (all, when no time is given); times over successes")
+    if any(c.verified is not None for c in table):
+        lines.append(
+            "verified = plans that passed verification, of those found (the rest: the best "
+            "plan when verification kept failing)"
+        )
     return "\n".join(lines)
 
 

@@ -110,6 +110,26 @@ def test_a_damaged_or_edited_records_line_is_skipped_not_a_crash(line, tmp_path)
     assert result.exit_code == 2 and "(1 line, none a job record" in result.stderr
 
 
+def test_report_counts_the_plans_that_passed_verification(tmp_path):
+    """A cell's `verified` column: successes whose plan passed verification; "-" when no
+    record says (verification off, or records from before it)."""
+    done = {**RECORD, "status": "success", "planning_time_s": 2.0, "rollouts": 50}
+    rows = [
+        {**done, "id": "a", "verified": True},
+        {**done, "id": "b", "verified": False},  # the best plan, verification kept failing
+        {**done, "id": "c", "verified": True},
+        {**RECORD, "id": "d", "status": "timeout", "planning_time_s": 9.0, "rollouts": 80},
+        {**done, "id": "e", "setting": "x2"},  # no verification recorded
+    ]
+    (tmp_path / RECORDS).write_text("".join(json.dumps(r) + "\n" for r in rows))
+    result = run("report", str(tmp_path))
+    assert result.exit_code == 0, result.output
+    x1, x2 = (line.split() for line in result.output.splitlines()[1:3])
+    assert x1[:3] == ["peg-in-hole", "x1", "bilba-fixed"] and x1[-3:] == ["3/4", "2/3", "50"]
+    assert x2[-3:] == ["1/1", "-", "50"]
+    assert "verified = plans that passed verification" in result.output
+
+
 def test_the_paper_grids_cover_its_whole_table():
     """Table 1: 8 peg settings × 2 BILBA variants × 5 seeds, B-EST on the same 8, 4 puzzle."""
     settings = {"pitch1", "pitch2", "pitch3", "pitch4", "x1", "x2", "y1", "y2"}
