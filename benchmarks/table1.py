@@ -7,11 +7,12 @@
 
 Prints a Markdown table: per task and setting, our median ± MAD planning time (successful
 runs) and successes for BILBA-Variable, BILBA-Fixed and B-EST, the paper's three figures
-(its hardware; "*" a timeout, "–" not reported), and BILBA / B-EST (the faster BILBA median
-over B-EST's, B-EST runs out of time counted at their timeout: "≤", an upper bound, where
-any ran out). Ends with one JSON line of the figures the
-targets read (issue 22: every peg median ≤ 10 s, every puzzle median ≤ 60 s, 5/5 everywhere,
-BILBA / B-EST ≤ 0.1).
+(its hardware; "*" a timeout, "–" not reported; "4 verified" where some plans found did not
+pass verification, the best plan of a search whose plans kept failing it), and BILBA / B-EST
+(the faster BILBA median over B-EST's, B-EST runs out of time counted at their timeout: "≤",
+an upper bound, where any ran out). Ends with one JSON line of the figures the targets read
+(issue 22: every peg median ≤ 10 s, every puzzle median ≤ 60 s, 5/5 everywhere, BILBA /
+B-EST ≤ 0.1).
 """
 
 import argparse
@@ -21,7 +22,7 @@ import sys
 from pathlib import Path
 
 from bilba_dist.schedulers.batch import read_records
-from bilba_dist.schedulers.report import cells
+from bilba_dist.schedulers.report import Cell, cells
 
 #: Table 1 of the paper: median planning time [s] (BILBA-Variable, BILBA-Fixed, B-EST); None
 #: where it reports none, "*" a timeout.
@@ -48,6 +49,12 @@ def shown(value: float | str | None) -> str:
     return value if isinstance(value, str) else f"{value:.1f}"
 
 
+def plans(c: Cell) -> str:
+    """Plans found of runs, and how many of them passed verification where some did not."""
+    unverified = c.verified is not None and c.verified < c.successes
+    return f"{c.successes}/{c.runs}" + (f", {c.verified} verified" if unverified else "")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("batches", type=Path, nargs="+")
@@ -65,9 +72,9 @@ def main() -> None:
             if c is None:
                 ours.append("not run")
             elif c.median_s is None:
-                ours.append(f"* ({c.successes}/{c.runs})")
+                ours.append(f"* ({plans(c)})")
             else:
-                ours.append(f"{c.median_s:.1f} ± {c.mad_s:.1f} ({c.successes}/{c.runs})")
+                ours.append(f"{c.median_s:.1f} ± {c.mad_s:.1f} ({plans(c)})")
         ratio = "–"
         bilba = [by_key.get((task, setting, p)) for p in PLANNERS[:2]]
         medians = [c.median_s for c in bilba if c is not None and c.median_s is not None]

@@ -83,6 +83,8 @@ def test_table1_puts_our_medians_beside_the_papers_with_the_ratio_to_best(tmp_pa
                 "timeout_s": 600.0}  # fmt: skip
 
     rows = [record("bilba-variable", s, "success", t) for s, t in enumerate([2.0, 4.0, 9.0])]
+    for row, verified in zip(rows, [True, False, True], strict=True):  # False: the best plan
+        row["verified"] = verified  # of a search whose plans kept failing verification
     rows += [record("bilba-fixed", 0, "success", 3.0), record("bilba-fixed", 1, "timeout", 900)]
     rows += [record("b-est", 0, "success", 100.0), record("b-est", 1, "timeout", 650.0)]
     (tmp_path / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
@@ -91,7 +93,7 @@ def test_table1_puts_our_medians_beside_the_papers_with_the_ratio_to_best(tmp_pa
     line = next(x for x in run.stdout.splitlines() if x.startswith("| peg-in-hole | x1 |"))
     # B-EST: median of 100 and the 600 s timeout = 350; BILBA's faster median 3.0
     assert line == (
-        "| peg-in-hole | x1 | 4.0 ± 2.0 (3/3) | 3.0 ± 0.0 (1/2) | 100.0 ± 0.0 (1/2) "
+        "| peg-in-hole | x1 | 4.0 ± 2.0 (3/3, 2 verified) | 3.0 ± 0.0 (1/2) | 100.0 ± 0.0 (1/2) "
         f"| 20.1 / 21.1 / 187.0 | ≤ {3.0 / 350.0:.3f} |"
     )
     assert "| puzzle | x1 | not run | not run | not run |" in run.stdout
