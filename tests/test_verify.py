@@ -84,7 +84,7 @@ def test_a_plan_that_fails_verification_is_not_returned_while_time_is_left(monke
     assert added[:1] == [lost]
     assert result.success and result.verification is not None
     assert not result.verification.passed and result.verification.held == {"1": 0.5}
-    assert result.reason.startswith("no plan passed verification within 3x the time")
+    assert result.reason.startswith("no plan passed verification within 3x the time of the first")
     assert [m.G_d for m in result.motions] == [m.G_d for m in first.motions]
 
 
@@ -129,3 +129,16 @@ def test_a_search_whose_plans_keep_failing_stops_at_its_effort_limit(monkeypatch
     assert not result.verification.passed and result.verification.held == {"1": 0.0}
     assert "within 2x the time of the first" in result.reason
     assert result.first_plan_s > 0 and result.planning_time_s < 2 * result.first_plan_s + 30
+
+
+def test_a_search_out_of_time_before_its_effort_limit_says_the_timeout_ended_it(monkeypatch):
+    """The same search with an effort limit it cannot reach: the timeout ends it, and the
+    reason says so (not the effort limit)."""
+    task = with_planner(load_task("peg-in-hole"), verify_effort=1000.0)
+    monkeypatch.setattr(
+        bilba, "verify_particles", lambda task, f: (make_particle(task, {"env.y": 0.5}),)
+    )
+    result = plan(task, RolloutWorker(task), "bilba-fixed", seed=0, timeout_s=8)
+    assert result.success and result.verification is not None
+    assert not result.verification.passed
+    assert result.reason.startswith("no plan passed verification before the timeout after")

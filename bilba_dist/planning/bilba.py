@@ -111,14 +111,20 @@ def plan(
     except PlanningTimeoutError:
         result.reason = f"timeout after {clock() - started:.1f} s"
     if not result.success and result.unverified is not None:
-        # out of time (or schedules) after plans that failed verification: the best of them
+        # out of effort, time or schedules after plans that failed verification: the best
         plans = result.verification.plans if result.verification else 1
         result.motions, result.verification = result.unverified
         result.verification.plans, result.success = plans, True
-        result.reason = (
-            f"no plan passed verification within {params.verify_effort:g}x the time of the "
-            f"first or the timeout ({result.reason}): the one that held best"
-        )
+        if search.deadline < deadline and result.reason.startswith("timeout"):
+            ended = (
+                f"within {params.verify_effort:g}x the time of the first "
+                f"({result.first_plan_s:.1f} s; planner.verify_effort)"
+            )
+        elif result.reason.startswith("timeout"):
+            ended = f"before the {result.reason}"
+        else:
+            ended = f"({result.reason})"
+        result.reason = f"no plan passed verification {ended}: the one that held best"
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
     if result.success and validate_on is not None:
