@@ -65,7 +65,7 @@ def test_a_plan_that_fails_verification_is_not_returned_while_time_is_left(monke
     it: that particle becomes a check particle and the search starts over; with no
     plan that passes within 3x the first one's time, the one that held best comes back,
     marked failed."""
-    task = load_task("peg-in-hole")
+    task = with_planner(load_task("peg-in-hole"), verify_effort=3.0)
     worker = RolloutWorker(task)
     first = plan(task, worker, "bilba-fixed", seed=0)  # verified: the nominal particles pass
     assert first.verification is not None and first.verification.passed
