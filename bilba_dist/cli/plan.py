@@ -30,6 +30,8 @@ from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
 from bilba_dist.task.schema import PRESETS
 
 EXIT_NO_PLAN = 1
+#: How `bilba plan` (one search or a portfolio) shows a plan that failed verification.
+FAILED = "FAILED (the plan that held best; none passed)"
 
 
 @click.command("plan")
@@ -233,7 +235,7 @@ def plan_portfolio(
             )
         )
     if output.get("verified") is False:
-        click.echo("verified   FAILED (the plan that held best; none passed): see its plan file")
+        click.echo(f"verified   {FAILED}: see its plan file")
     click.echo(f"plan file  {out}")
     if log_path is not None:
         click.echo(f"log        {log_path} (the winning search's)")
@@ -253,7 +255,7 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
     )
     check = result.verification
     if check is not None and result.success:
-        how = "passed" if check.passed else "FAILED (the plan that held best; none passed)"
+        how = "passed" if check.passed else FAILED
         click.echo(f"verified   {how} on {check.text()} (plan {check.plans} of the search)")
     for k, m in enumerate(result.motions, 1):
         xyz = " ".join(f"{v:+.4f}" for v in m.G_d.translation)
