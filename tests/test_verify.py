@@ -94,6 +94,7 @@ def test_a_plan_that_fails_verification_is_not_returned_while_time_is_left(monke
         ({"verify_min": 2}, "verify_min"),
         ({"verify_particles": -1}, "verify_particles"),
         ({"verify_share": 0}, "verify_share"),
+        ({"verify_effort": 0.5}, "verify_effort"),
     ],
 )
 def test_a_verification_setting_out_of_range_is_one_line(tmp_path, peg_yaml, planner, words):
