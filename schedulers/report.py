@@ -60,8 +60,12 @@ def cells(records: list[dict[str, Any]]) -> list[Cell]:
 
 
 def format_table(table: list[Cell]) -> str:
+    # a user's task is named by its path in the jobs file: columns as wide as their longest
+    wt = max([13, *(len(c.task) for c in table)]) + 1
+    ws = max([11, *(len(c.setting) for c in table)]) + 1
+    wp = max([15, *(len(c.planner) for c in table)]) + 1
     lines = [
-        f"{'task':<14}{'setting':<12}{'planner':<16}{'time s (median ± MAD)':>22}"
+        f"{'task':<{wt}}{'setting':<{ws}}{'planner':<{wp}}{'time s (median ± MAD)':>22}"
         f"{'success':>9}{'verified':>10}{'rollouts':>10}",
     ]
     for c in table:
@@ -72,7 +76,7 @@ def format_table(table: list[Cell]) -> str:
         rollouts = f"{c.median_rollouts:.0f}" if c.median_rollouts is not None else "-"
         verified = f"{c.verified}/{c.successes}" if c.verified is not None else "-"
         lines.append(
-            f"{c.task:<14}{c.setting:<12}{c.planner:<16}{time_text:>22}"
+            f"{c.task:<{wt}}{c.setting:<{ws}}{c.planner:<{wp}}{time_text:>22}"
             f"{f'{c.successes}/{c.runs}':>9}{verified:>10}{rollouts:>10}"
         )
     lines.append("* = some runs timed out (all, when no time is given); times over successes")

@@ -130,6 +130,17 @@ def test_report_counts_the_plans_that_passed_verification(tmp_path):
     assert "verified = plans that passed verification" in result.output
 
 
+def test_report_columns_fit_a_users_task_named_by_its_path(tmp_path):
+    """A jobs file names a user's task by its path; a long one must not run into the
+    setting's column."""
+    task = "/home/someone/parts/my-own-triangular-peg.yaml"
+    done = {**RECORD, "task": task, "status": "success", "planning_time_s": 2.0, "rollouts": 5}
+    (tmp_path / RECORDS).write_text(json.dumps(done) + "\n")
+    result = run("report", str(tmp_path))
+    assert result.exit_code == 0, result.output
+    assert result.output.splitlines()[1].split()[:3] == [task, "x1", "bilba-fixed"]
+
+
 def test_the_paper_grids_cover_its_whole_table():
     """Table 1: 8 peg settings × 2 BILBA variants × 5 seeds, B-EST on the same 8, 4 puzzle."""
     settings = {"pitch1", "pitch2", "pitch3", "pitch4", "x1", "x2", "y1", "y2"}
