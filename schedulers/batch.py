@@ -74,7 +74,7 @@ def execute_job(job: Job, spec: TaskSpec, source: str, actors: int = 0) -> dict[
             panda.close()
     if result.success:
         status = "success"
-    elif result.reason.startswith("timeout"):
+    elif result.timed_out:
         status = "timeout"
     else:
         status = "no-plan"

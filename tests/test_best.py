@@ -48,7 +48,7 @@ def test_b_est_is_deterministic_per_seed(flat):
 def test_b_est_out_of_time_says_so():
     task = load_task("peg-in-hole", ["grasp.x=1cm"])
     result = plan(task, RolloutWorker(task, "panda"), "b-est", seed=0, timeout_s=0.5)
-    assert not result.success and result.reason.startswith("timeout")
+    assert not result.success and result.timed_out and result.reason.startswith("timeout")
     assert "tree nodes" in result.reason and result.motions == []
 
 

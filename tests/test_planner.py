@@ -212,7 +212,7 @@ def test_plan_motion_setpoints_are_reachable_joint_targets(pitch_plan):
 def test_failed_search_says_why(peg):
     worker = RolloutWorker(peg, "panda")
     timeout = plan(peg, worker, "bilba-fixed", seed=0, timeout_s=0.0)
-    assert not timeout.success and timeout.reason.startswith("timeout")
+    assert not timeout.success and timeout.timed_out and timeout.reason.startswith("timeout")
     assert timeout.motions == []
     spec = peg.spec.model_copy(
         update={"goal": peg.spec.goal.model_copy(update={"env": "floor/-z"})}

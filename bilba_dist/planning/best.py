@@ -121,6 +121,7 @@ def plan_best(
                 result.planning_time_s = clock() - started
                 return result
     result.reason = f"timeout after {clock() - started:.1f} s ({len(nodes)} tree nodes)"
+    result.timed_out = True
     result.planning_time_s = clock() - started
     return result
 

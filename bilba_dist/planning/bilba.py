@@ -96,7 +96,6 @@ def plan(
     deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
     search = contact_search(task, evaluator, variant, deadline, clock, recorder)
     search.on_progress = lambda contact, best: _show(progress, contact, best)
-    timed_out = False
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
@@ -110,19 +109,19 @@ def plan(
             else f"no contact schedule: {exc}"
         )
     except PlanningTimeoutError:
-        timed_out = True
+        result.timed_out = True
         result.reason = f"timeout after {clock() - started:.1f} s"
     if not result.success and result.unverified is not None:
         # out of effort, time or schedules after plans that failed verification: the best
         plans = result.verification.plans if result.verification else 1
         result.motions, result.verification = result.unverified
         result.verification.plans, result.success = plans, True
-        if timed_out and search.deadline < deadline:  # verify_effort's deadline, not ours
+        if result.timed_out and search.deadline < deadline:  # verify_effort's deadline, not ours
             ended = (
                 f"within {params.verify_effort:g}x the time of the first "
                 f"({result.first_plan_s:.1f} s; planner.verify_effort)"
             )
-        elif timed_out:
+        elif result.timed_out:
             ended = f"before the {result.reason}"
         else:
             ended = f"({result.reason})"

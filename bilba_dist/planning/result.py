@@ -66,6 +66,8 @@ class PlanResult:
     first_plan_s: float = 0.0
     #: The best plan that failed verification so far, for a search that runs out of time.
     unverified: tuple[list[PlannedMotion], Verification] | None = None
+    #: Whether the search ended at its deadline (the timeout, or verify_effort's).
+    timed_out: bool = False
 
     def outcome(self) -> dict[str, Any]:
         """Success, why not, time, rollouts and whether the plan passed verification (None:
