@@ -118,3 +118,21 @@ def test_floating_model_shapes_are_the_pieces(task):
         assert environment_check(sim, task) == []
     finally:
         sim.close()
+
+
+def test_a_part_named_anything_loads_with_its_shapes(tmp_path):
+    """The part's name is free text: one with XML's special characters, a slash and a
+    non-ASCII letter once broke the URDF the Panda model loads (it named the mesh files)."""
+    data = peg_in_hole_task("names", [regular_polygon(3, 0.05)], 0.002, 0.0)
+    data["manipuland"]["name"] = 'peg & "<co>" / ü'
+    path = tmp_path / "names.yaml"
+    path.write_text(yaml.safe_dump(data, allow_unicode=True), encoding="utf-8")
+    task = load_task(str(path))
+    sim = PandaSim(task, task.X_GM, SimSettings())
+    try:
+        state = p.getLinkState(sim.robot, sim.part_link, physicsClientId=sim.client)
+        X_WP = pin.XYZQUATToSE3(np.array([*state[4], *state[5]]))
+        located = lambda i: (sim.robot, sim.part_link, X_WP)  # noqa: E731
+        assert check_part(sim.client, task.manipuland, located) == []
+    finally:
+        sim.close()

@@ -80,7 +80,7 @@ def part_collisions(part: Part, folder: Path) -> str:
             size = " ".join(f"{v:.17g}" for v in piece.box_size)
             geometry, origin = f'<box size="{size}"/>', _origin(piece.X_PB)
         else:
-            obj = folder / f"{part.name}_{piece.name}.obj"
+            obj = folder / f"{piece.name}.obj"  # the part name is free text: not in a path
             write_obj(inset(piece, URDF_MESH_MARGIN_M), obj)
             geometry, origin = f'<mesh filename="{obj}"/>', _origin(pin.SE3.Identity())
         elements.append(
