@@ -208,31 +208,33 @@ def test_the_merged_hand_has_the_dynamics_of_its_links(tmp_path, nominal_peg):
     mass matrix and gravity torques those of the unmerged robot (to rounding)."""
     task, particle = nominal_peg
     client = p.connect(p.DIRECT)
-    robots = [
-        p.loadURDF(
-            str(
-                panda_with_part(
-                    task.manipuland, particle.X_GM, 0.3, tmp_path / str(merge), merge_hand=merge
-                )
-            ),
-            useFixedBase=True,
-            flags=p.URDF_USE_INERTIA_FROM_FILE,
-            physicsClientId=client,
-        )
-        for merge in (False, True)
-    ]
-    assert [p.getNumJoints(r, physicsClientId=client) for r in robots] == [13, 8]
-    rng = np.random.default_rng(1)
-    for _ in range(5):
-        q7 = rng.uniform(-1.5, 1.5, 7).tolist()
-        M = [np.array(p.calculateMassMatrix(r, q7, physicsClientId=client)) for r in robots]
-        g = [
-            p.calculateInverseDynamics(r, q7, [0.0] * 7, [0.0] * 7, physicsClientId=client)
-            for r in robots
+    try:
+        robots = [
+            p.loadURDF(
+                str(
+                    panda_with_part(
+                        task.manipuland, particle.X_GM, 0.3, tmp_path / str(merge), merge_hand=merge
+                    )
+                ),
+                useFixedBase=True,
+                flags=p.URDF_USE_INERTIA_FROM_FILE,
+                physicsClientId=client,
+            )
+            for merge in (False, True)
         ]
-        assert np.allclose(M[0], M[1], rtol=1e-12, atol=1e-12)
-        assert np.allclose(g[0], g[1], rtol=1e-12, atol=1e-12)
-    p.disconnect(client)
+        assert [p.getNumJoints(r, physicsClientId=client) for r in robots] == [13, 8]
+        rng = np.random.default_rng(1)
+        for _ in range(5):
+            q7 = rng.uniform(-1.5, 1.5, 7).tolist()
+            M = [np.array(p.calculateMassMatrix(r, q7, physicsClientId=client)) for r in robots]
+            g = [
+                p.calculateInverseDynamics(r, q7, [0.0] * 7, [0.0] * 7, physicsClientId=client)
+                for r in robots
+            ]
+            assert np.allclose(M[0], M[1], rtol=1e-12, atol=1e-12)
+            assert np.allclose(g[0], g[1], rtol=1e-12, atol=1e-12)
+    finally:
+        p.disconnect(client)
 
 
 def test_worker_keeps_its_worlds_until_the_geometry_changes(nominal_peg):
