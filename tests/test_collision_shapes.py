@@ -97,13 +97,17 @@ def environment_check(sim, task: Task) -> list[str]:
     return check_part(sim.client, task.environment, lambda i: (sim.env.bodies[i], -1, X_WO))
 
 
+def manipuland_check(sim: PandaSim, task: Task) -> list[str]:
+    """``check_part`` on the Panda model's part link, where the arm holds it now."""
+    state = p.getLinkState(sim.robot, sim.part_link, physicsClientId=sim.client)
+    X_WP = pin.XYZQUATToSE3(np.array([*state[4], *state[5]]))
+    return check_part(sim.client, task.manipuland, lambda i: (sim.robot, sim.part_link, X_WP))
+
+
 def test_panda_model_shapes_are_the_pieces(task):
     sim = PandaSim(task, task.X_GM, SimSettings())
     try:
-        state = p.getLinkState(sim.robot, sim.part_link, physicsClientId=sim.client)
-        X_WP = pin.XYZQUATToSE3(np.array([*state[4], *state[5]]))
-        located = lambda i: (sim.robot, sim.part_link, X_WP)  # noqa: E731
-        assert check_part(sim.client, task.manipuland, located) == []
+        assert manipuland_check(sim, task) == []
         assert environment_check(sim, task) == []
     finally:
         sim.close()
@@ -130,9 +134,6 @@ def test_a_part_named_anything_loads_with_its_shapes(tmp_path):
     task = load_task(str(path))
     sim = PandaSim(task, task.X_GM, SimSettings())
     try:
-        state = p.getLinkState(sim.robot, sim.part_link, physicsClientId=sim.client)
-        X_WP = pin.XYZQUATToSE3(np.array([*state[4], *state[5]]))
-        located = lambda i: (sim.robot, sim.part_link, X_WP)  # noqa: E731
-        assert check_part(sim.client, task.manipuland, located) == []
+        assert manipuland_check(sim, task) == []
     finally:
         sim.close()
