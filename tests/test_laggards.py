@@ -10,7 +10,7 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.planning.evaluate import Candidate, Scored
 from bilba_dist.planning.laggards import laggards_past, past_face, step_rank
 from bilba_dist.rollout import Motion, ParticleState
-from bilba_dist.task.loader import load_task
+from bilba_dist.task.loader import load_task, with_planner
 
 TASK = load_task("peg-in-hole", ["grasp.x=2cm"])
 INNER = ContactPair("wall_px/inner", "peg/+x")  # the +x wall's inner face at x = 32.75 mm
@@ -61,12 +61,14 @@ def test_a_motion_that_leaves_a_laggard_past_the_face_ranks_below_one_that_does_
 
 
 def test_the_peg_with_2_cm_grasp_offsets_plans_without_pruning_an_edge():
-    """Seed 3, bilba-fixed: ranking by count alone (the previous code) took motions that
-    left the third peg on the wall top and pruned 5 edges (2247 rollouts); now none (243)."""
+    """Seed 3, bilba-fixed, at 240 Hz (the step this case was found at): ranking by count
+    alone (the previous code) took motions that left the third peg on the wall top and
+    pruned 5 edges (2247 rollouts); now none (243)."""
     from bilba_dist.planning.bilba import plan
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
-    worker = RolloutWorker(TASK, "panda")
-    result = plan(TASK, worker, "bilba-fixed", 3, 300)
+    task = with_planner(TASK, sim_timestep_s=1 / 240)
+    worker = RolloutWorker(task, "panda")
+    result = plan(task, worker, "bilba-fixed", 3, 300)
     worker.close()
     assert result.success and result.pruned == []

@@ -282,16 +282,18 @@ def test_a_motion_refuses_a_stiffness_that_is_not_symmetric_psd(K):
             Motion(K, pin.SE3.Identity())
 
 
+@pytest.mark.parametrize("rate_hz", [240, 120])
 @pytest.mark.parametrize("model", ["panda", "floating"])
-def test_early_stop_changes_at_most_a_grazing_contact(model):
-    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+def test_early_stop_changes_at_most_a_grazing_contact(model, rate_hz):
+    task = with_planner(load_task("peg-in-hole", ["grasp.x=1cm"]), sim_timestep_s=1 / rate_hz)
     requests = fixed_motion_set(task, 50, seed=11)
     full = RolloutWorker(task, model, SimSettings(early_stop=False)).simulate(requests)
     early = RolloutWorker(task, model, SimSettings(early_stop=True)).simulate(requests)
     # A contact set may differ by a pair grazing the 0.2 mm contact distance (the Panda: one
-    # of 50, its part 0.02 mm from where the full-length rollout leaves it), no more
+    # of 50 at 240 Hz, two at 120 Hz, a corner on a chamfer with the part 0.02 mm from where
+    # the full-length rollout leaves it), no more
     differ = [(e, f) for e, f in zip(early, full, strict=True) if e.contacts != f.contacts]
-    assert len(differ) <= 1
+    assert len(differ) <= (1 if rate_hz == 240 else 2)
     for e, f in differ:
         apart = np.linalg.norm(e.state.X_WM.translation - f.state.X_WM.translation)
         assert apart < SimSettings().contact_distance_m

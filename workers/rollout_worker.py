@@ -38,7 +38,7 @@ class RolloutWorker:
     ) -> None:
         self.model = model
         self._panda: dict[bytes, PandaSim] = {}
-        self._floating: FloatingSim | None = None
+        self._floating: dict[float, FloatingSim] = {}  # by step
         self.task = self._as_task(task)
         self._own = settings or SimSettings()
         self.settings = self._task_settings()
@@ -50,7 +50,7 @@ class RolloutWorker:
         planner = self.task.spec.planner
         settings = replace(
             self._own,
-            timestep_s=planner.sim_timestep_s,
+            timestep_s=self.task.timestep_s,
             contact_distance_m=planner.contact_distance_m,
             cartesian_ramp=self._own.cartesian_ramp or planner.cartesian_ramp,
         )
@@ -73,10 +73,9 @@ class RolloutWorker:
             self.close()
         self.task = new
         self.settings = self._task_settings()
-        for sim in self._panda.values():  # kept worlds follow the new task's settings
-            sim.settings = self.settings
-        if self._floating is not None:
-            self._floating.settings = self.settings
+        for sim in [*self._panda.values(), *self._floating.values()]:
+            # kept worlds follow the new task's settings, each at its own step
+            sim.settings = self._settings_at(sim.settings.timestep_s)
 
     def simulate(
         self, requests: Sequence[RolloutRequest], prefetch: Sequence[RolloutRequest] = ()
@@ -92,23 +91,31 @@ class RolloutWorker:
     def _one(self, request: RolloutRequest) -> RolloutResult:
         particle = request.particle
         if self.model == "floating":
-            return self._floating_sim().rollout(
+            return self._floating_sim(particle.timestep_s).rollout(
                 particle.X_WO, particle.X_GM, request.state, request.motion, particle.friction_scale
             )
         physics = (particle.friction_scale, particle.mass_scale)
-        sim = self.panda_sim(particle.X_GM)
+        sim = self.panda_sim(particle.X_GM, particle.timestep_s)
         return sim.rollout(particle.X_WO, request.state, request.motion, physics)
 
-    def panda_sim(self, X_GM: pin.SE3) -> PandaSim:
-        key = grasp_key(X_GM)
+    def _settings_at(self, timestep_s: float | None) -> SimSettings:
+        if timestep_s is None or timestep_s == self.settings.timestep_s:
+            return self.settings
+        return replace(self.settings, timestep_s=timestep_s)
+
+    def panda_sim(self, X_GM: pin.SE3, timestep_s: float | None = None) -> PandaSim:
+        """The world of grasp ``X_GM`` at the task's step, or at ``timestep_s``."""
+        settings = self._settings_at(timestep_s)
+        key = grasp_key(X_GM) + np.float64(settings.timestep_s).tobytes()
         if key not in self._panda:
-            self._panda[key] = PandaSim(self.task, X_GM, self.settings)
+            self._panda[key] = PandaSim(self.task, X_GM, settings)
         return self._panda[key]
 
-    def _floating_sim(self) -> FloatingSim:
-        if self._floating is None:
-            self._floating = FloatingSim(self.task, self.settings)
-        return self._floating
+    def _floating_sim(self, timestep_s: float | None = None) -> FloatingSim:
+        settings = self._settings_at(timestep_s)
+        if settings.timestep_s not in self._floating:
+            self._floating[settings.timestep_s] = FloatingSim(self.task, settings)
+        return self._floating[settings.timestep_s]
 
     def pid(self) -> int:
         """The process simulating (a Ray actor's worker process: tests kill it)."""
@@ -124,9 +131,9 @@ class RolloutWorker:
         for sim in self._panda.values():
             sim.close()
         self._panda.clear()
-        if self._floating is not None:
-            self._floating.close()
-            self._floating = None
+        for floating in self._floating.values():
+            floating.close()
+        self._floating.clear()
 
 
 def world_key(spec: TaskSpec) -> tuple:

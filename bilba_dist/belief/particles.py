@@ -32,6 +32,9 @@ class Particle:
     X_GM: pin.SE3
     X_WO: pin.SE3
     offsets: Mapping[str, float] = field(default_factory=dict)  # axis -> offset [m|rad|1]
+    #: The physics step it is simulated at; None: the task's (verification particles are
+    #: simulated at the fine step when the task plans at a coarser one: task/timestep.py)
+    timestep_s: float | None = None
 
     @property
     def friction_scale(self) -> float:

@@ -82,7 +82,7 @@ def validate(
         task = with_friction(task, friction_scale)
     if timestep is not None:
         task = with_planner(task, sim_timestep_s=timestep)
-    step = f", step {task.spec.planner.sim_timestep_s * 1000:g} ms"
+    step = f", step {task.timestep_s * 1000:g} ms"
     from bilba_dist.schedulers.session import (
         rollout_backend,  # imports pybullet: after input checks
     )

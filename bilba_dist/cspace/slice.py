@@ -76,7 +76,7 @@ class CObsSlice:
         if len(V) == 0:
             return ()
         vertex, f = np.nonzero(self._on_facets(V)[1])
-        e1, e2 = _plane_axes(self.stack.A[f])
+        e1, e2 = plane_axes(self.stack.A[f])
         directions = np.cos(PROBE_ANGLES)[None, :, None] * e1[:, None, :]
         directions += np.sin(PROBE_ANGLES)[None, :, None] * e2[:, None, :]
         probes = V[vertex][:, None, :] + PROBE_M * directions
@@ -180,7 +180,7 @@ class CObsSlice:
         return self.vertices[mask] if len(mask) else np.zeros((0, 3))
 
 
-def _plane_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def plane_axes(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Two unit vectors spanning the plane of each unit normal: e1 = n × (the axis least
     along n), e2 = n × e1."""
     axis = np.eye(3)[np.argmin(np.abs(normals), axis=1)]
@@ -194,7 +194,7 @@ def _facet_region(polytopes: tuple[Polytope, ...], i: int, f: int) -> tuple[np.n
     −TOL, as ``classify`` has it), as triangles in 3-D and their normals."""
     polytope = polytopes[i]
     ring, normal = polytope.polygons[f], polytope.A[f]
-    e1, e2 = _plane_axes(normal[None, :])
+    e1, e2 = plane_axes(normal[None, :])
     axes = np.vstack([e1, e2])  # (2, 3): plane coordinates w ↦ origin + w @ axes
     # On the facet's plane itself: the hull's corners of a facet merged from nearly coplanar
     # ones lie up to ~1e-8 m off it, and points drawn there would not count as on it.

@@ -10,12 +10,15 @@ become check particles, and the search starts over. The replay may spend at most
 ``verify_share`` of the rollouts the search has spent so far, so an easy plan gets fewer
 particles (at least one offset) and a hard one all of them."""
 
+from dataclasses import replace
+
 from bilba_dist.belief.particles import Particle, make_particle, random_offsets
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion, Verification
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
+from bilba_dist.task.timestep import verify_timestep
 
 #: The verification draw: neither the check particles' (7) nor `bilba validate`'s usual
 #: held-out draws (0, 1), so a held-out replay of a verified plan stays independent.
@@ -28,12 +31,18 @@ ADD_CHECKS = 2
 def verify_particles(task: Task, friction_margin: float) -> tuple[Particle, ...]:
     """``planner.verify_particles`` offsets drawn inside the bounds, each at friction
     x(1 - f), x1 and x(1 + f) (x1 alone when f, robust acceptance's margin, is 0); in the
-    order of the offsets, so a prefix is the first offsets at every friction."""
+    order of the offsets, so a prefix is the first offsets at every friction. Simulated at
+    the fine step where the task plans at a coarser one (task/timestep.py): the ones a plan
+    loses become check particles, and stay at that step."""
     f = friction_margin
     bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
     drawn = random_offsets(bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED)
+    step = verify_timestep(task.timestep_s)
     return tuple(
-        make_particle(task, {**o, "friction": scale} if f > 0 else o)
+        replace(
+            make_particle(task, {**o, "friction": scale} if f > 0 else o),
+            timestep_s=step if step != task.timestep_s else None,
+        )
         for o in drawn
         for scale in ((-f, 0.0, f) if f > 0 else (0.0,))
     )

@@ -27,6 +27,7 @@ from bilba_dist.task.schema import (
     TaskSpec,
     parse_axis_values,
 )
+from bilba_dist.task.timestep import auto_timestep
 from bilba_dist.task.yaml_lines import Location, line_of, load_yaml_with_lines, read_text
 
 
@@ -47,6 +48,13 @@ class Task:
     @property
     def name(self) -> str:
         return self.spec.name
+
+    @property
+    def timestep_s(self) -> float:
+        """The physics step: the task file's, or the one read off its parts on loading."""
+        step = self.spec.planner.sim_timestep_s
+        assert step is not None  # build_task sets it
+        return step
 
     @property
     def hash(self) -> str:
@@ -140,14 +148,23 @@ def build_task(spec: TaskSpec, source: str) -> Task:
             raise TaskError(
                 f"{key}: {part.name!r} has no face {face!r}; faces: {', '.join(part.face_names)}"
             )
+    X_GM, X_WO, X_WG0 = (
+        to_pose(spec.grasp),
+        to_pose(spec.environment_pose),
+        start_gripper_pose(spec),
+    )
+    if spec.planner.sim_timestep_s is None:  # unset: read off the parts, and written in
+        step = auto_timestep(environment, manipuland, goal, X_WO.inverse() * X_WG0 * X_GM)
+        planner = spec.planner.model_copy(update={"sim_timestep_s": step})
+        spec = spec.model_copy(update={"planner": planner})
     return Task(
         spec=spec,
         source=source,
         manipuland=manipuland,
         environment=environment,
-        X_GM=to_pose(spec.grasp),
-        X_WO=to_pose(spec.environment_pose),
-        X_WG0=start_gripper_pose(spec),
+        X_GM=X_GM,
+        X_WO=X_WO,
+        X_WG0=X_WG0,
         goal=goal,
     )
 
