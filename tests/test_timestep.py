@@ -109,3 +109,19 @@ def test_a_plan_made_at_the_coarse_step_is_verified_at_the_fine_step():
     # particles became check particles), the search's at the task's own
     assert fine >= result.verification.particles * len(result.motions) > 0
     assert backend.steps.count(None) == result.rollouts - fine
+
+
+@pytest.mark.parametrize(
+    ("clearance_mm", "says"), [(6, "at 120 Hz, verified at 240 Hz"), (2, "at 240 Hz")]
+)
+def test_bilba_plan_says_the_step_of_a_task_of_our_own(tmp_path, clearance_mm, says):
+    from tests.test_task_files import run_cli
+
+    data = peg_in_hole_task("octagon", [regular_polygon(8, 0.05)], clearance_mm / 1000, 0.004)
+    path = write_task(tmp_path, yaml.safe_dump(data))
+    out = tmp_path / "plan.json"
+    result = run_cli("plan", str(path), "--workers", "0", "--no-log", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    (planner,) = [line for line in result.output.splitlines() if line.startswith("planner")]
+    assert planner.endswith(f"physics {says}")
+    assert "plan found" in result.output

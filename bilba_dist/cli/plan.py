@@ -28,6 +28,7 @@ from bilba_dist.robot.drivers import DRIVER_NAMES
 from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
 from bilba_dist.task.schema import PRESETS
+from bilba_dist.task.timestep import verify_timestep
 
 EXIT_NO_PLAN = 1
 #: How `bilba plan` (one search or a portfolio) shows a plan that failed verification.
@@ -246,7 +247,11 @@ def plan_portfolio(
 def summary(result: PlanResult, task: Task, out: Path) -> None:
     bounds = ", ".join(f"{k}={v:g}" for k, v in task.spec.uncertainty.items()) or "none"
     click.echo(f"task       {task.name} ({task.hash[:12]}), uncertainty {bounds}")
-    click.echo(f"planner    {result.planner}, seed {result.seed}")
+    step = f"physics at {1 / task.timestep_s:.4g} Hz"
+    verifies = task.spec.planner.verify_particles > 0 and result.planner != "b-est"
+    if verifies and verify_timestep(task.timestep_s) != task.timestep_s:
+        step += f", verified at {1 / verify_timestep(task.timestep_s):.4g} Hz"
+    click.echo(f"planner    {result.planner}, seed {result.seed}, {step}")
     status = "plan found" if result.success else f"NO PLAN: {result.reason}"
     click.echo(f"outcome    {status}")
     click.echo(
