@@ -20,6 +20,8 @@ from bilba_dist.schedulers.jobs import load_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "deploy" / "jobs" / "smoke.yaml"  # 4 jobs: peg pitch, 2 planners × 2 seeds
+#: 4 jobs of 2-3 s each, for the tests that interrupt a batch while jobs run
+SLOW_SMOKE = ROOT / "tests" / "data" / "hex-smoke.yaml"
 BIN = Path(sys.executable).parent
 
 
@@ -160,9 +162,9 @@ def test_the_paper_grids_cover_its_whole_table():
 def smoke_batch(tmp_path_factory):
     """The smoke grid, its driver interrupted (SIGINT) after the first record, a torn record
     line appended as a killed driver would leave it, then finished with --resume."""
-    out = tmp_path_factory.mktemp("batch") / "smoke"
+    out = tmp_path_factory.mktemp("batch") / "hex-smoke"
     driver = subprocess.Popen(
-        [BIN / "bilba", "batch", SMOKE, "--out", out, "--workers", "1"],
+        [BIN / "bilba", "batch", SLOW_SMOKE, "--out", out, "--workers", "1"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -173,7 +175,7 @@ def smoke_batch(tmp_path_factory):
     before = read_records(out)
     with (out / RECORDS).open("a") as f:
         f.write('{"id": "peg-in-hole-pitch-bil')  # torn: a killed driver mid-write
-    resumed = run("batch", str(SMOKE), "--out", str(out), "--resume")
+    resumed = run("batch", str(SLOW_SMOKE), "--out", str(out), "--resume")
     return out, driver.returncode, err, before, resumed
 
 
@@ -186,7 +188,7 @@ def test_interrupted_batch_resumes_running_only_what_was_missing(smoke_batch):
     assert f"{len(before)} already recorded" in resumed.output
     records = read_records(out)
     ids = [r["id"] for r in records]
-    assert sorted(ids) == sorted(j.id for j in load_jobs(SMOKE).jobs)  # each job exactly once
+    assert sorted(ids) == sorted(j.id for j in load_jobs(SLOW_SMOKE).jobs)  # each job once
     assert all(r["status"] == "success" for r in records)
     for r in records:
         assert (out / r["log"]).stat().st_size > 0
@@ -195,7 +197,7 @@ def test_interrupted_batch_resumes_running_only_what_was_missing(smoke_batch):
 
 def test_a_finished_batch_folder_is_not_overwritten_without_resume(smoke_batch):
     out = smoke_batch[0]
-    result = run("batch", str(SMOKE), "--out", str(out))
+    result = run("batch", str(SLOW_SMOKE), "--out", str(out))
     assert result.exit_code == 2 and "already holds 4 job records" in result.stderr
 
 
@@ -204,7 +206,7 @@ def test_report_prints_the_table_and_writes_a_png(smoke_batch, tmp_path):
     png = tmp_path / "r.png"
     result = run("report", str(out), "--png", str(png))
     assert result.exit_code == 0, result.output
-    rows = [line for line in result.output.splitlines() if line.startswith("peg-in-hole")]
+    rows = [line for line in result.output.splitlines() if line.startswith("hex-peg")]
     assert len(rows) == 2 and all("2/2" in row and "±" in row for row in rows)
     assert png.read_bytes()[:4] == b"\x89PNG"
     missing = run("report", str(tmp_path / "nothing"))
@@ -251,7 +253,7 @@ def test_a_node_lost_mid_batch_still_records_every_job_once_with_the_same_plans(
     killer = threading.Thread(target=remove_a_node_once_the_first_job_is_in, daemon=True)
     killer.start()
     try:
-        run_batch(load_jobs(SMOKE), out, address=cluster.address)
+        run_batch(load_jobs(SLOW_SMOKE), out, address=cluster.address)
     finally:
         cluster.shutdown()
     killer.join(5)
