@@ -247,11 +247,12 @@ def plan_portfolio(
 def summary(result: PlanResult, task: Task, out: Path) -> None:
     bounds = ", ".join(f"{k}={v:g}" for k, v in task.spec.uncertainty.items()) or "none"
     click.echo(f"task       {task.name} ({task.hash[:12]}), uncertainty {bounds}")
-    step = f"physics at {1 / task.timestep_s:.4g} Hz"
+    step, verify_step = task.timestep_s, verify_timestep(task.timestep_s)
+    physics = f"physics at {1 / step:.4g} Hz"
     verifies = task.spec.planner.verify_particles > 0 and result.planner != "b-est"
-    if verifies and verify_timestep(task.timestep_s) != task.timestep_s:
-        step += f", verified at {1 / verify_timestep(task.timestep_s):.4g} Hz"
-    click.echo(f"planner    {result.planner}, seed {result.seed}, {step}")
+    if verifies and verify_step != step:
+        physics += f", verified at {1 / verify_step:.4g} Hz"
+    click.echo(f"planner    {result.planner}, seed {result.seed}, {physics}")
     status = "plan found" if result.success else f"NO PLAN: {result.reason}"
     click.echo(f"outcome    {status}")
     click.echo(
