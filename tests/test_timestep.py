@@ -18,11 +18,16 @@ from bilba_dist.workers.rollout_worker import RolloutWorker
 from tests.conftest import write_task
 
 
-def _prism_task(tmp_path, sides: int, clearance_m: float, planner: dict | None = None):
+def _prism_file(tmp_path, sides: int, clearance_m: float, planner: dict | None = None):
+    """A task file of our own: a regular prism in a chamfered hole with that clearance."""
     data = peg_in_hole_task(f"{sides}-gon", [regular_polygon(sides, 0.05)], clearance_m, 0.004)
     if planner is not None:
         data["planner"] = planner
-    return load_task(str(write_task(tmp_path, yaml.safe_dump(data))))
+    return write_task(tmp_path, yaml.safe_dump(data))
+
+
+def _prism_task(tmp_path, sides: int, clearance_m: float, planner: dict | None = None):
+    return load_task(str(_prism_file(tmp_path, sides, clearance_m, planner)))
 
 
 @pytest.mark.parametrize(
@@ -117,8 +122,7 @@ def test_a_plan_made_at_the_coarse_step_is_verified_at_the_fine_step():
 def test_bilba_plan_says_the_step_of_a_task_of_our_own(tmp_path, clearance_mm, says):
     from tests.test_task_files import run_cli
 
-    data = peg_in_hole_task("octagon", [regular_polygon(8, 0.05)], clearance_mm / 1000, 0.004)
-    path = write_task(tmp_path, yaml.safe_dump(data))
+    path = _prism_file(tmp_path, 8, clearance_mm / 1000)
     out = tmp_path / "plan.json"
     result = run_cli("plan", str(path), "--workers", "0", "--no-log", "--out", str(out))
     assert result.exit_code == 0, result.output
