@@ -7,10 +7,16 @@ import numpy as np
 import pytest
 
 from bilba_dist import load_task, plan
-from bilba_dist.belief.particles import make_particle
+from bilba_dist.belief.particles import initial_belief, make_particle
+from bilba_dist.belief.start import start_belief
+from bilba_dist.geometry.contact import FREE
 from bilba_dist.planning import bilba, verify
+from bilba_dist.planning.evaluate import Evaluator
+from bilba_dist.planning.make_contact import Step
 from bilba_dist.planning.verify import VERIFY_SEED, verify_particles, within_budget
+from bilba_dist.plans.replay import run_motions
 from bilba_dist.record.reader import read_log
+from bilba_dist.rollout import Motion
 from bilba_dist.task.loader import with_planner, with_preset
 from bilba_dist.workers.rollout_worker import RolloutWorker
 from tests.conftest import write_task
@@ -143,3 +149,94 @@ def test_a_search_out_of_time_before_its_effort_limit_says_the_timeout_ended_it(
     assert result.success and result.verification is not None
     assert not result.verification.passed
     assert result.reason.startswith("no plan passed verification before the timeout after")
+
+
+def _made(task, motions, worker):
+    """A plan's steps and the contacts it made on the planning particles, as the search
+    keeps them (bilba.Reached): the start, then the belief after each motion."""
+    particles = bilba.planning_particles(task, initial_belief(task))
+    beliefs = [start_belief(task, particles), *run_motions(task, motions, particles, worker)]
+    steps = [Step(Motion(m.K, m.G_d, m.timeout_s), m.contact, m.score) for m in motions]
+    modes = [FREE, *(m.contact for m in motions)]
+    return steps, [
+        bilba.Reached(b, mode, j) for j, (b, mode) in enumerate(zip(beliefs, modes, strict=True))
+    ]
+
+
+@pytest.fixture(scope="module")
+def fixed_peg_plan():
+    task = load_task("peg-in-hole")
+    worker = RolloutWorker(task)
+    result = plan(task, worker, "bilba-fixed", seed=0)
+    assert result.success and result.verification is not None and result.verification.passed
+    return task, worker, result
+
+
+@pytest.mark.parametrize(
+    ("offsets", "resumed_at"),
+    [
+        ({}, 2),  # the nominal part: in every contact but the goal's, the last one
+        ({"friction": 2.0}, 1),  # at 3x friction it sticks on the chamfer it first meets
+        ({"grasp.x": 0.02}, None),  # 2 cm aside: on the wall's top, in none of the plan's
+    ],
+)
+def test_a_plan_that_lost_a_particle_resumes_from_the_last_contact_that_particle_made(
+    fixed_peg_plan, offsets, resumed_at
+):
+    task, worker, result = fixed_peg_plan
+    assert [str(m.contact) for m in result.motions] == [
+        "(wall_my/chamfer, peg/-z)",
+        "(wall_my/inner, peg/-y)",
+        "(floor/+z, peg/-z)",
+    ]
+    steps, reached = _made(task, result.motions, worker)
+    lost = make_particle(task, offsets)
+    evaluator = Evaluator(worker)
+    search = bilba.contact_search(task, evaluator, "bilba-fixed", deadline=float("inf"))
+    at = bilba.resume_at(task, search, steps, reached, [lost])
+    assert evaluator.rollouts == 2  # the lost particle replayed up to the last contact
+    if resumed_at is None:
+        assert at is None
+        return
+    k, check = at
+    assert k == resumed_at
+    assert check.particles == (lost,)  # no check particles there before (made without)
+    assert reached[k].mode in check.contacts[0]
+    # with check particles there, the lost one joins them, last
+    there = reached[k].belief.with_check(reached[k].belief)
+    reached[k] = bilba.Reached(there, reached[k].mode, reached[k].steps)
+    _, joined = bilba.resume_at(task, search, steps, reached, [lost])
+    assert joined.particles == (*there.particles, lost)
+    assert all(a is b for a, b in zip(joined.states, there.states, strict=False))
+    replayed, before = joined.states[-1], check.states[0]  # the same rollouts again
+    assert np.array_equal(replayed.X_WM.homogeneous, before.X_WM.homogeneous)
+    # lost again after it was added in this attempt: once, last
+    reached[k] = bilba.Reached(there.with_check(joined), reached[k].mode, reached[k].steps)
+    _, again = bilba.resume_at(task, search, steps, reached, [lost])
+    assert again.particles == joined.particles
+
+
+def test_a_plan_that_fails_verification_is_repaired_from_the_contact_both_made(monkeypatch):
+    """The first plan loses a particle at 3x friction (stuck on the chamfer both reach with
+    its first motion): the search goes on from that chamfer, the lost particle a check
+    particle there, rather than from the start."""
+    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
+    sticky = make_particle(task, {"friction": 2.0})
+    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
+    events: list[tuple] = []
+    verify_plan, next_contact = bilba._verify, bilba._next_contact
+
+    def verifying(task, motions, *args):
+        events.append(("verify", str(motions[0].contact)))
+        return verify_plan(task, motions, *args)
+
+    def searching(graph, belief, mode, *args):
+        events.append(("from", str(mode), belief.check.particles[-1].offsets))
+        return next_contact(graph, belief, mode, *args)
+
+    monkeypatch.setattr(bilba, "_verify", verifying)
+    monkeypatch.setattr(bilba, "_next_contact", searching)
+    plan(task, RolloutWorker(task), "bilba-fixed", seed=0, timeout_s=30)
+    first = events.index(next(e for e in events if e[0] == "verify"))
+    assert events[first] == ("verify", "(wall_my/chamfer, peg/-z)")
+    assert events[first + 1] == ("from", "(wall_my/chamfer, peg/-z)", sticky.offsets)

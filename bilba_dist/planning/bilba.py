@@ -2,7 +2,8 @@
 each contact with MakeContact, replan after each contact reached, prune an edge that failed,
 and go on from the contact reached while a schedule from it is left (``keep_reached``; the
 paper starts over from the initial belief, as we do when none is), up to ``n_attempts`` or
-the timeout."""
+the timeout. A plan that fails verification is repaired the same way: the search goes on
+from the last of its contacts that the particles it lost made too (``resume_at``)."""
 
 import itertools
 import time
@@ -27,6 +28,7 @@ from bilba_dist.planning.make_contact import (
     ContactOutcome,
     ContactSearch,
     PlanningTimeoutError,
+    Step,
     StiffnessRule,
     make_contact,
     planned_motions,
@@ -44,7 +46,7 @@ from bilba_dist.planning.verify import (
     within_budget,
 )
 from bilba_dist.robot.panda import PandaModel
-from bilba_dist.rollout import RolloutBackend, require_world
+from bilba_dist.rollout import RolloutBackend, RolloutRequest, require_world
 from bilba_dist.task.loader import Task
 
 Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
@@ -252,6 +254,8 @@ def _attempts(
             graph.restore()
             result.rounds += 1
         graph.reweight(_positions(belief))
+        reached = [Reached(belief, mode, 0)]  # the contacts made so far in this attempt
+        added: list[Particle] = []  # check particles added in this attempt (verification)
         while True:
             schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)
             target = schedule[1]
@@ -268,6 +272,7 @@ def _attempts(
                 break
             steps += outcome.steps
             belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
+            reached.append(Reached(belief, mode, len(steps)))
             if mode == task.goal:
                 motions = planned_motions(steps, b0, panda)
                 if result.first_plan_s == 0.0:  # go on for verify_effort x this at most
@@ -277,7 +282,16 @@ def _attempts(
                 lost = _verify(task, motions, verifying, search, result) if verifying else []
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
-                    break  # start over, checking particles this plan lost
+                    added += lost[:ADD_CHECKS]
+                    k = resume_at(task, search, steps, reached, added)
+                    if k is None or not params.keep_reached:
+                        break  # start over, checking particles this plan lost
+                    # go on from the last contact that the lost particles made too
+                    reached = reached[: k[0] + 1]
+                    belief, mode = reached[-1].belief.with_check(k[1]), reached[-1].mode
+                    steps = steps[: reached[-1].steps]
+                    graph.reweight(_positions(belief))
+                    continue
                 result.success, result.reason = True, ""
                 result.motions = motions
                 result.final_belief = belief
@@ -286,6 +300,56 @@ def _attempts(
     result.reason = (
         f"all {result.attempts} attempts failed ({len(result.pruned)} edges pruned); "
         f"last: {result.reason}"
+    )
+
+
+@dataclass(frozen=True)
+class Reached:
+    """A contact made in the current attempt: the belief there, the mode, and how many of
+    the attempt's steps led there."""
+
+    belief: Belief
+    mode: ContactPair
+    steps: int
+
+
+def resume_at(
+    task: Task,
+    search: ContactSearch,
+    steps: list[Step],
+    reached: list[Reached],
+    lost: list[Particle],
+) -> tuple[int, Belief] | None:
+    """Where a plan that lost ``lost`` in verification can be repaired rather than searched
+    again from the start: the last contact it made (before the goal) that the lost
+    particles made too, or one after it, replaying its motions on them; and the check
+    particles there, with the lost ones (last, replacing any there already: those added
+    earlier in the attempt). None when there is no such contact."""
+    extra = start_belief(task, lost)
+    at: dict[int, Belief] = {}
+    done = 0
+    for k in range(1, len(reached) - 1):
+        for step in steps[done : reached[k].steps]:
+            requests = [
+                RolloutRequest(p, st, step.motion)
+                for p, st in zip(extra.particles, extra.states, strict=True)
+            ]
+            extra = extra.after(search.evaluator.simulate(requests))
+        done = reached[k].steps
+        later = frozenset(r.mode for r in reached[k:])
+        if extra.count(later) == len(extra):
+            at[k] = extra
+    if not at:
+        return None
+    k = max(at)
+    check = reached[k].belief.check
+    if check is None:
+        return k, at[k]
+    kept = [i for i, p in enumerate(check.particles) if p not in lost]
+    return k, Belief(
+        (*(check.particles[i] for i in kept), *at[k].particles),
+        (*(check.states[i] for i in kept), *at[k].states),
+        (*(check.contacts[i] for i in kept), *at[k].contacts),
     )
 
 

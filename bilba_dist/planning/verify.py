@@ -6,9 +6,10 @@ drop either way (docs/planner.md, Verification). So a plan found is first replay
 particles it was not planned on: offsets drawn inside the bounds (a fixed draw), each at
 friction x(1 - f), x1 and x(1 + f). A plan that brings fewer than ``verify_min`` of them to
 the goal at some friction is not returned: up to ``ADD_CHECKS`` of the particles it failed
-become check particles, and the search starts over. The replay may spend at most
-``verify_share`` of the rollouts the search has spent so far, so an easy plan gets fewer
-particles (at least one offset) and a hard one all of them."""
+become check particles, and the search goes on from the last contact of the plan that
+they made too (planning/bilba.py, ``resume_at``), or starts over. The replay may spend at
+most ``verify_share`` of the rollouts the search has spent so far, so an easy plan gets
+fewer particles (at least one offset) and a hard one all of them."""
 
 from dataclasses import replace
 

@@ -279,7 +279,8 @@ class PlannerParams(Strict):
     # offsets drawn inside the bounds (a fixed draw), each at friction x(1 - f), x1 and
     # x(1 + f); one that brings fewer than verify_min of them to the goal at some friction is
     # not returned, two of the particles it lost become check particles, and the search
-    # starts over. The replay spends at most verify_share of the search's rollouts so far
+    # goes on from the last contact of that plan they made too (else from the start). The
+    # replay spends at most verify_share of the search's rollouts so far
     # (at least one offset). The puzzle's grasp.x ±1 cm plans then hold >= 0.9 of 14 held-out
     # particles at 0.5, 1 and 1.5 μ (docs/planner.md, Verification).
     verify_particles: int = Field(default=14, ge=0, le=256)
