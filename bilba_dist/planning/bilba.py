@@ -283,13 +283,18 @@ def _attempts(
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
                     added += lost[:ADD_CHECKS]
-                    k = resume_at(task, search, steps, reached, added)
-                    if k is None or not params.keep_reached:
+                    resumed = (
+                        resume_at(task, search, steps, reached, added)
+                        if params.keep_reached
+                        else None
+                    )
+                    if resumed is None:
                         break  # start over, checking particles this plan lost
                     # go on from the last contact that the lost particles made too
-                    reached = reached[: k[0] + 1]
-                    belief, mode = reached[-1].belief.with_check(k[1]), reached[-1].mode
-                    steps = steps[: reached[-1].steps]
+                    k, check = resumed
+                    reached = reached[: k + 1]
+                    belief, mode = reached[k].belief.with_check(check), reached[k].mode
+                    steps = steps[: reached[k].steps]
                     graph.reweight(_positions(belief))
                     continue
                 result.success, result.reason = True, ""
@@ -326,7 +331,7 @@ def resume_at(
     particles there, with the lost ones (last, replacing any there already: those added
     earlier in the attempt). None when there is no such contact."""
     extra = start_belief(task, lost)
-    at: dict[int, Belief] = {}
+    found: tuple[int, Belief] | None = None  # the last contact they made, their belief there
     done = 0
     for k in range(1, len(reached) - 1):
         for step in steps[done : reached[k].steps]:
@@ -338,18 +343,18 @@ def resume_at(
         done = reached[k].steps
         later = frozenset(r.mode for r in reached[k:])
         if extra.count(later) == len(extra):
-            at[k] = extra
-    if not at:
+            found = k, extra
+    if found is None:
         return None
-    k = max(at)
+    k, extra = found
     check = reached[k].belief.check
     if check is None:
-        return k, at[k]
+        return k, extra
     kept = [i for i, p in enumerate(check.particles) if p not in lost]
     return k, Belief(
-        (*(check.particles[i] for i in kept), *at[k].particles),
-        (*(check.states[i] for i in kept), *at[k].states),
-        (*(check.contacts[i] for i in kept), *at[k].contacts),
+        (*(check.particles[i] for i in kept), *extra.particles),
+        (*(check.states[i] for i in kept), *extra.states),
+        (*(check.contacts[i] for i in kept), *extra.contacts),
     )
 
 
