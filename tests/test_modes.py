@@ -3,14 +3,22 @@ from itertools import pairwise
 import networkx as nx
 import numpy as np
 import pytest
+import yaml
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.errors import NoScheduleError
 from bilba_dist.geometry.contact import FREE, ContactPair
-from bilba_dist.modes.graph import GraphParams, build_mode_graph, uncertainty_direction
+from bilba_dist.modes.graph import (
+    FAIL_CAP,
+    GraphParams,
+    build_mode_graph,
+    uncertainty_direction,
+)
 from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.task.loader import load_task, with_planner
+from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
+from tests.conftest import write_task
 
 SETTINGS = ["grasp.pitch=2deg", "grasp.roll=2deg", "grasp.x=1cm", "env.y=1cm", "grasp.z=5mm"]
 
@@ -200,3 +208,61 @@ def test_near_edges_only_add_to_the_vertex_graph(puzzle):
     assert set(plain.nodes) == set(near.nodes)
     assert set(plain.edges) < set(near.edges)
     assert set(_puzzle_graph(puzzle, 0.6e-3).edges) <= set(near.edges)
+
+
+def _octagon(tmp_path, fail_cost: float):
+    """A task of our own: an octagonal peg, 6 mm clearance, grasp.x ±1 cm."""
+    data = peg_in_hole_task("8-gon", [regular_polygon(8, 0.05)], 0.006, 0.004, {"grasp.x": "1cm"})
+    data["planner"] = {"fail_cost": fail_cost}
+    return load_task(str(write_task(tmp_path, yaml.safe_dump(data))))
+
+
+@pytest.mark.parametrize("fail_cost", [0.0, 0.1])
+def test_a_contact_that_failed_costs_more_up_to_its_cap(tmp_path, fail_cost):
+    task = _octagon(tmp_path, fail_cost)
+    graph, schedule = belief_graph(task, initial_belief(task), task.X_WG0, SliceCache(task))
+    target = schedule[1]
+    before = {u: graph.graph.edges[u, target]["cost"] for u in graph.graph.predecessors(target)}
+    failed = next(u for u in before if u != FREE)
+    graph.prune(failed, target)
+    for u in graph.graph.predecessors(target):
+        assert graph.graph.edges[u, target]["cost"] == pytest.approx(before[u] + fail_cost)
+    for _ in range(FAIL_CAP + 1):  # more failures than count
+        graph.prune(failed, target)
+    assert graph.failures[target] == FAIL_CAP + 2 and len(before) > 2
+    capped = {u: before[u] + fail_cost * FAIL_CAP for u in before}
+    for u in graph.graph.predecessors(target):
+        assert graph.graph.edges[u, target]["cost"] == pytest.approx(capped[u])
+    positions = np.array([p.X_OM(task.X_WG0).translation for p in initial_belief(task)])
+    graph.restore()
+    graph.reweight(positions)  # the failures outlive the edges' return
+    assert graph.graph.has_edge(failed, target)
+    for u in before:
+        assert graph.graph.edges[u, target]["cost"] == pytest.approx(capped[u])
+
+
+def test_after_a_failure_an_equally_short_schedule_avoids_the_contact(tmp_path):
+    """The failed contact is entered from elsewhere: with ``fail_cost`` the schedule from
+    free goes another way of as many hops; without, it keeps the contact."""
+    schedules = {}
+    for fail_cost in (0.0, 0.1):
+        task = _octagon(tmp_path, fail_cost)
+        graph, schedule = belief_graph(task, initial_belief(task), task.X_WG0, SliceCache(task))
+        assert len(graph.alternatives(FREE, 3)) > 1
+        other = next(u for u in graph.graph.predecessors(schedule[1]) if u != FREE)
+        graph.prune(other, schedule[1])
+        schedules[fail_cost] = schedule, graph.schedule()
+    (first, again), (first_c, avoided) = schedules[0.0], schedules[0.1]
+    assert first == first_c and again == first
+    assert avoided[1] != first[1] and len(avoided) == len(first)
+
+
+@pytest.mark.parametrize("fail_cost", [-0.1, 11, ".nan"])
+def test_a_fail_cost_out_of_range_is_one_line(tmp_path, peg_yaml, fail_cost):
+    from tests.test_task_files import run_cli
+
+    text = yaml.safe_dump({**peg_yaml, "planner": {"fail_cost": 0.5}})
+    path = write_task(tmp_path, text.replace("fail_cost: 0.5", f"fail_cost: {fail_cost}"))
+    result = run_cli("plan", str(path), "--workers", "0", "--no-log")
+    assert result.exit_code == 2 and "fail_cost" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1

@@ -5,7 +5,9 @@ modes that occur together at a boundary vertex (and, with ``near_edge_m``, two w
 come that close: a short move through free space). The free mode connects to the ``n_free``
 modes nearest the belief. The cost of entering mode v is ``1 − δ_proj·|u(b)·n(v)|``: u(b) is
 the principal direction of the particles' position spread and n(v) the C-obs normal of v,
-so contacts whose normal points along the uncertainty are slightly preferred.
+so contacts whose normal points along the uncertainty are slightly preferred; with
+``fail_cost`` c, entering a mode costs c more for each edge into it pruned so far (up to
+``FAIL_CAP`` of them): of routes as short, those that avoid contacts that failed come first.
 """
 
 from collections import Counter
@@ -24,6 +26,8 @@ from bilba_dist.geometry.contact import FREE, ContactPair
 NEAREST_SAMPLES = 32
 #: Two schedules' costs within this are "as many hops" (each hop costs 1 − δ_proj·|u·n|).
 TIE = 0.5
+#: A mode's failures count towards its cost up to this many (``fail_cost`` each).
+FAIL_CAP = 3
 
 
 @dataclass(frozen=True)
@@ -32,25 +36,36 @@ class GraphParams:
     delta_proj: float = 1e-4
     min_mode_vertices: int = 4
     near_edge_m: float = 0.0
+    fail_cost: float = 0.0
 
 
 class ModeGraph:
     """A directed graph over modes with belief-dependent edge costs; prunable."""
 
     def __init__(
-        self, cslice: CObsSlice, graph: nx.DiGraph, goal: ContactPair, delta_proj: float
+        self,
+        cslice: CObsSlice,
+        graph: nx.DiGraph,
+        goal: ContactPair,
+        delta_proj: float,
+        fail_cost: float = 0.0,
     ) -> None:
         self.cslice = cslice
         self.graph = graph
         self.goal = goal
         self.delta_proj = delta_proj
+        self.fail_cost = fail_cost
+        self.failures: Counter[ContactPair] = Counter()  # edges into each mode pruned so far
         self._pruned: list[tuple[ContactPair, ContactPair, dict]] = []
 
     def reweight(self, positions: np.ndarray) -> None:
         """Recompute every edge cost for a belief whose particles are at ``positions``."""
         u = uncertainty_direction(positions)
         for _, v, data in self.graph.edges(data=True):
-            data["cost"] = edge_cost(u, self.normal(v), self.delta_proj)
+            data["cost"] = edge_cost(u, self.normal(v), self.delta_proj) + self._penalty(v)
+
+    def _penalty(self, mode: ContactPair) -> float:
+        return self.fail_cost * min(self.failures[mode], FAIL_CAP)
 
     @property
     def modes(self) -> list[ContactPair]:
@@ -92,10 +107,15 @@ class ModeGraph:
         ]
 
     def prune(self, u: ContactPair, v: ContactPair) -> None:
-        """Remove the edge u → v (a transition that failed)."""
+        """Remove the edge u → v (a transition that failed); with ``fail_cost``, the other
+        edges into v cost that much more (the failures are kept across ``restore``)."""
         if self.graph.has_edge(u, v):
             self._pruned.append((u, v, self.graph.edges[u, v]))
             self.graph.remove_edge(u, v)
+        self.failures[v] += 1
+        if self.failures[v] <= FAIL_CAP:
+            for _, _, data in self.graph.in_edges(v, data=True):
+                data["cost"] += self.fail_cost
 
     def restore(self) -> None:
         """Put back every pruned edge (costs as they were when pruned; ``reweight`` after)."""
@@ -140,7 +160,7 @@ def build_mode_graph(
         graph.add_edge(b, a, cost=edge_cost(u, normals[a], params.delta_proj))
     for m in nearest_modes(cslice, modes, positions.mean(axis=0), params.n_free):
         graph.add_edge(FREE, m, cost=edge_cost(u, normals[m], params.delta_proj))
-    return ModeGraph(cslice, graph, goal, params.delta_proj)
+    return ModeGraph(cslice, graph, goal, params.delta_proj, params.fail_cost)
 
 
 def near_pairs(

@@ -33,7 +33,7 @@ class SliceCache:
 
 def graph_params(task: Task) -> GraphParams:
     p = task.spec.planner
-    return GraphParams(p.n_free, p.delta_proj, p.min_mode_vertices, p.near_edge_m)
+    return GraphParams(p.n_free, p.delta_proj, p.min_mode_vertices, p.near_edge_m, p.fail_cost)
 
 
 def belief_graph(

@@ -175,6 +175,7 @@ PAPER_PLANNER: dict[str, Any] = {
     "n_attempts": 50,
     "gp_patience": 3,  # always run the 3 GP rounds
     "near_edge_m": 0.0,  # modes joined only where they share a vertex
+    "fail_cost": 0.0,  # a failed contact costs no more (its failed edge alone is pruned)
     "setpoint_press_m": 0.003,  # "slightly inside" (the paper gives no figure)
     "check_friction": 0.0,  # plan at the task's friction, no check particles
     "verify_particles": 0,  # return the first plan found
@@ -206,6 +207,12 @@ class PlannerParams(Strict):
     # the puzzle's 0.5 mm side clearances, also took the generated family from 60 to 62 of
     # 63 plans (benchmarks/README.md, Tasks nobody tuned; docs/design.md).
     near_edge_m: float = Field(default=0.0006, ge=0, le=0.05)
+    # Entering a mode costs this much more (a hop costs about 1) for each edge into it pruned
+    # so far, up to 3 (ours; the authors: 0): of schedules as short, those that avoid
+    # contacts that failed come first. The puzzle's slot contacts failed from one bar top
+    # after another, up to 13 times a run; at 0.1 its grasp.x ±1 cm took 0.75x the
+    # rollouts, generated tasks 0.89x (docs/planner.md, Outer loop).
+    fail_cost: float = Field(default=0.1, ge=0, le=10)
     # Schedule attempts (each ends with a pruned edge or a plan); 0, the default, is no limit
     # but the timeout (ours; the authors stop after 50).
     n_attempts: int = Field(default=0, ge=0, le=100_000)
