@@ -211,7 +211,7 @@ class PlannerParams(Strict):
     # so far, up to 3 (ours; the authors: 0): of schedules as short, those that avoid
     # contacts that failed come first. The puzzle's slot contacts failed from one bar top
     # after another, up to 13 times a run; at 0.1 its grasp.x ±1 cm took 0.75x the
-    # rollouts, generated tasks 0.89x (docs/planner.md, Outer loop).
+    # rollouts, generated tasks 0.89x, the peg's ±2 cm cells 1.2x (docs/planner.md).
     fail_cost: float = Field(default=0.1, ge=0, le=10)
     # Schedule attempts (each ends with a pruned edge or a plan); 0, the default, is no limit
     # but the timeout (ours; the authors stop after 50).
