@@ -112,10 +112,10 @@ class ModeGraph:
         if self.graph.has_edge(u, v):
             self._pruned.append((u, v, self.graph.edges[u, v]))
             self.graph.remove_edge(u, v)
+        before = self._penalty(v)
         self.failures[v] += 1
-        if self.failures[v] <= FAIL_CAP:
-            for _, _, data in self.graph.in_edges(v, data=True):
-                data["cost"] += self.fail_cost
+        for _, _, data in self.graph.in_edges(v, data=True):
+            data["cost"] += self._penalty(v) - before
 
     def restore(self) -> None:
         """Put back every pruned edge (costs as they were when pruned; ``reweight`` after)."""
