@@ -35,6 +35,34 @@ def write_task(tmp_path: Path, data: dict | str, name: str = "task.yaml") -> Pat
     return path
 
 
+def prism_file(
+    tmp_path: Path,
+    sides: int,
+    clearance_m: float,
+    planner: dict | None = None,
+    uncertainty: dict[str, str] | None = None,
+) -> Path:
+    """A task file of our own: a regular prism in a chamfered hole with that clearance
+    (``uncertainty`` by default grasp.pitch ±2°)."""
+    from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
+
+    outline = [regular_polygon(sides, 0.05)]
+    data = peg_in_hole_task(f"{sides}-gon", outline, clearance_m, 0.004, uncertainty)
+    if planner is not None:
+        data["planner"] = planner
+    return write_task(tmp_path, yaml.safe_dump(data))
+
+
+def prism_task(
+    tmp_path: Path,
+    sides: int,
+    clearance_m: float,
+    planner: dict | None = None,
+    uncertainty: dict[str, str] | None = None,
+) -> Task:
+    return load_task(str(prism_file(tmp_path, sides, clearance_m, planner, uncertainty)))
+
+
 @pytest.fixture(scope="session")
 def default_plan_file(tmp_path_factory) -> Path:
     """A plan of the default task, planned in-process with `bilba plan`, as a file."""

@@ -17,8 +17,8 @@ from bilba_dist.modes.graph import (
 )
 from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.task.loader import load_task, with_planner
-from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
-from tests.conftest import write_task
+from tests.conftest import prism_task, write_task
+from tests.test_task_files import run_cli
 
 SETTINGS = ["grasp.pitch=2deg", "grasp.roll=2deg", "grasp.x=1cm", "env.y=1cm", "grasp.z=5mm"]
 
@@ -212,9 +212,7 @@ def test_near_edges_only_add_to_the_vertex_graph(puzzle):
 
 def _octagon(tmp_path, fail_cost: float):
     """A task of our own: an octagonal peg, 6 mm clearance, grasp.x ±1 cm."""
-    data = peg_in_hole_task("8-gon", [regular_polygon(8, 0.05)], 0.006, 0.004, {"grasp.x": "1cm"})
-    data["planner"] = {"fail_cost": fail_cost}
-    return load_task(str(write_task(tmp_path, yaml.safe_dump(data))))
+    return prism_task(tmp_path, 8, 0.006, {"fail_cost": fail_cost}, {"grasp.x": "1cm"})
 
 
 @pytest.mark.parametrize("fail_cost", [0.0, 0.1])
@@ -259,8 +257,6 @@ def test_after_a_failure_an_equally_short_schedule_avoids_the_contact(tmp_path):
 
 @pytest.mark.parametrize("fail_cost", [-0.1, 11, ".nan"])
 def test_a_fail_cost_out_of_range_is_one_line(tmp_path, peg_yaml, fail_cost):
-    from tests.test_task_files import run_cli
-
     text = yaml.safe_dump({**peg_yaml, "planner": {"fail_cost": 0.5}})
     path = write_task(tmp_path, text.replace("fail_cost: 0.5", f"fail_cost: {fail_cost}"))
     result = run_cli("plan", str(path), "--workers", "0", "--no-log")

@@ -5,29 +5,15 @@ from dataclasses import replace
 import numpy as np
 import pinocchio as pin
 import pytest
-import yaml
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import start_belief
 from bilba_dist.planning.verify import verify_particles
 from bilba_dist.rollout import Motion, RolloutRequest
 from bilba_dist.task.loader import load_task, with_planner
-from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
 from bilba_dist.task.timestep import COARSE_STEP_S, FINE_STEP_S, goal_play
 from bilba_dist.workers.rollout_worker import RolloutWorker
-from tests.conftest import write_task
-
-
-def _prism_file(tmp_path, sides: int, clearance_m: float, planner: dict | None = None):
-    """A task file of our own: a regular prism in a chamfered hole with that clearance."""
-    data = peg_in_hole_task(f"{sides}-gon", [regular_polygon(sides, 0.05)], clearance_m, 0.004)
-    if planner is not None:
-        data["planner"] = planner
-    return write_task(tmp_path, yaml.safe_dump(data))
-
-
-def _prism_task(tmp_path, sides: int, clearance_m: float, planner: dict | None = None):
-    return load_task(str(_prism_file(tmp_path, sides, clearance_m, planner)))
+from tests.conftest import prism_file, prism_task
 
 
 @pytest.mark.parametrize(
@@ -49,12 +35,12 @@ def test_a_builtin_task_plans_at_the_step_its_goal_play_allows(name, play_mm, st
 
 @pytest.mark.parametrize(("clearance_mm", "step"), [(6, COARSE_STEP_S), (2, FINE_STEP_S)])
 def test_a_task_of_our_own_gets_its_step_from_its_clearance(tmp_path, clearance_mm, step):
-    task = _prism_task(tmp_path, 8, clearance_mm / 1000)
+    task = prism_task(tmp_path, 8, clearance_mm / 1000)
     assert task.timestep_s == step
 
 
 def test_a_step_the_file_sets_is_kept(tmp_path):
-    task = _prism_task(tmp_path, 8, 0.006, {"sim_timestep_s": 0.002})
+    task = prism_task(tmp_path, 8, 0.006, {"sim_timestep_s": 0.002})
     assert task.timestep_s == 0.002
     # ... and one unset again is read off the parts
     assert with_planner(task, sim_timestep_s=None).timestep_s == COARSE_STEP_S
@@ -122,7 +108,7 @@ def test_a_plan_made_at_the_coarse_step_is_verified_at_the_fine_step():
 def test_bilba_plan_says_the_step_of_a_task_of_our_own(tmp_path, clearance_mm, says):
     from tests.test_task_files import run_cli
 
-    path = _prism_file(tmp_path, 8, clearance_mm / 1000)
+    path = prism_file(tmp_path, 8, clearance_mm / 1000)
     out = tmp_path / "plan.json"
     result = run_cli("plan", str(path), "--workers", "0", "--no-log", "--out", str(out))
     assert result.exit_code == 0, result.output

@@ -5,7 +5,6 @@ import json
 
 import numpy as np
 import pytest
-import yaml
 
 from bilba_dist import load_task, plan
 from bilba_dist.belief.particles import initial_belief, make_particle
@@ -19,9 +18,8 @@ from bilba_dist.plans.replay import run_motions
 from bilba_dist.record.reader import read_log
 from bilba_dist.rollout import Motion
 from bilba_dist.task.loader import with_planner, with_preset
-from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
 from bilba_dist.workers.rollout_worker import RolloutWorker
-from tests.conftest import write_task
+from tests.conftest import prism_task, write_task
 from tests.test_task_files import run_cli
 
 
@@ -218,51 +216,16 @@ def test_a_plan_that_lost_a_particle_resumes_from_the_last_contact_that_particle
     assert again.particles == joined.particles
 
 
-def test_a_plan_that_fails_verification_is_repaired_from_the_contact_both_made(monkeypatch):
-    """The first plan loses a particle at 3x friction (stuck on the chamfer both reach with
-    its first motion): the search goes on from that chamfer, the lost particle a check
-    particle there, rather than from the start."""
-    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
-    sticky = make_particle(task, {"friction": 2.0})
-    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
-    events: list[tuple] = []
-    verify_plan, next_contact = bilba._verify, bilba._next_contact
-
-    def verifying(task, motions, *args):
-        events.append(("verify", str(motions[0].contact)))
-        return verify_plan(task, motions, *args)
-
-    def searching(graph, belief, mode, *args):
-        events.append(("from", str(mode), belief.check.particles[-1].offsets))
-        return next_contact(graph, belief, mode, *args)
-
-    monkeypatch.setattr(bilba, "_verify", verifying)
-    monkeypatch.setattr(bilba, "_next_contact", searching)
-    plan(task, RolloutWorker(task), "bilba-fixed", seed=0, timeout_s=30)
-    first = events.index(next(e for e in events if e[0] == "verify"))
-    assert events[first] == ("verify", "(wall_my/chamfer, peg/-z)")
-    assert events[first + 1] == ("from", "(wall_my/chamfer, peg/-z)", sticky.offsets)
-
-
-def test_a_task_of_our_own_is_repaired_from_a_contact_of_its_refused_plan(tmp_path, monkeypatch):
-    """The repair on an octagonal peg of our own (not the peg whose plan the tests above
-    pin): a particle stuck at 10x friction (it makes every contact of the plan but the
-    goal) is not started over with, but taken on from a contact of the refused plan that it
-    made too, where it joins the check particles."""
-    data = peg_in_hole_task("8-gon", [regular_polygon(8, 0.05)], 0.006, 0.004, {"grasp.x": "1cm"})
-    data["planner"] = {"verify_effort": 2.0}
-    task = load_task(str(write_task(tmp_path, yaml.safe_dump(data))))
-    sticky = make_particle(task, {"friction": 9.0})
-    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
-    refused: list[list[str]] = []
+def _watch_repair(monkeypatch) -> list[tuple]:
+    """Spy on a search: ("verified", the plan's contacts, whether it lost particles) after
+    each verification, ("from", mode, the last check particle's offsets) at each contact
+    sought."""
     events: list[tuple] = []
     verify_plan, next_contact = bilba._verify, bilba._next_contact
 
     def verifying(task, motions, *args):
         lost = verify_plan(task, motions, *args)
-        if lost and not refused:
-            refused.append([str(m.contact) for m in motions])
-            events.append(("refused",))
+        events.append(("verified", [str(m.contact) for m in motions], bool(lost)))
         return lost
 
     def searching(graph, belief, mode, *args):
@@ -271,8 +234,42 @@ def test_a_task_of_our_own_is_repaired_from_a_contact_of_its_refused_plan(tmp_pa
 
     monkeypatch.setattr(bilba, "_verify", verifying)
     monkeypatch.setattr(bilba, "_next_contact", searching)
+    return events
+
+
+def _after_first_refusal(events: list[tuple]) -> tuple[list[str], tuple]:
+    """The first refused plan's contacts, and the event right after its verification."""
+    k = next((k for k, e in enumerate(events) if e[0] == "verified" and e[2]), None)
+    assert k is not None, "no plan was refused"
+    return events[k][1], events[k + 1]
+
+
+def test_a_plan_that_fails_verification_is_repaired_from_the_contact_both_made(monkeypatch):
+    """The first plan loses a particle at 3x friction (stuck on the chamfer both reach with
+    its first motion): the search goes on from that chamfer, the lost particle a check
+    particle there, rather than from the start."""
+    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
+    sticky = make_particle(task, {"friction": 2.0})
+    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
+    events = _watch_repair(monkeypatch)
+    plan(task, RolloutWorker(task), "bilba-fixed", seed=0, timeout_s=30)
+    first = next(k for k, e in enumerate(events) if e[0] == "verified")
+    refused, after = _after_first_refusal(events)
+    assert events[first][2] and refused[0] == "(wall_my/chamfer, peg/-z)"  # the first plan
+    assert after == ("from", "(wall_my/chamfer, peg/-z)", sticky.offsets)
+
+
+def test_a_task_of_our_own_is_repaired_from_a_contact_of_its_refused_plan(tmp_path, monkeypatch):
+    """The repair on an octagonal peg of our own (not the peg whose plan the tests above
+    pin): a particle stuck at 10x friction (it makes every contact of the plan but the
+    goal) is not started over with, but taken on from a contact of the refused plan that it
+    made too, where it joins the check particles."""
+    task = prism_task(tmp_path, 8, 0.006, {"verify_effort": 2.0}, {"grasp.x": "1cm"})
+    sticky = make_particle(task, {"friction": 9.0})
+    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
+    events = _watch_repair(monkeypatch)
     plan(task, RolloutWorker(task), "bilba-fixed", seed=0, timeout_s=60)
-    assert refused, "the sticky particle did not fail the first plan"
-    _, mode, offsets = events[events.index(("refused",)) + 1]
-    assert mode != str(FREE) and mode in refused[0][:-1]  # a contact before the goal
+    refused, (kind, mode, offsets) = _after_first_refusal(events)
+    assert kind == "from" and mode != str(FREE)
+    assert mode in refused[:-1]  # a contact of the refused plan before the goal
     assert offsets == sticky.offsets
