@@ -205,3 +205,50 @@ def test_expected_first_plan_is_the_minimum_of_draws(monkeypatch):
     for n in (1, 2, 3):
         tuples = list(itertools.product(times, repeat=n))
         assert expected_min(times, n) == pytest.approx(sum(map(min, tuples)) / len(tuples))
+
+
+def _batch(folder: Path, task: str, rollouts: dict[tuple[str, int], int]) -> Path:
+    """A made-up batch folder: one successful run of ``task`` per (setting, seed)."""
+    import json
+
+    folder.mkdir()
+    rows = [
+        {"task": task, "setting": setting, "planner": "bilba-variable", "seed": seed,
+         "status": "success", "planning_time_s": n / 100, "rollouts": n, "verified": True}
+        for (setting, seed), n in rollouts.items()
+    ]  # fmt: skip
+    (folder / "records.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    return folder
+
+
+def test_ab_pairs_runs_by_seed_and_says_how_sure_a_ratio_is(tmp_path):
+    """x1: every seed halves (the interval is the value); y1: seeds swing 4x either way
+    around a geometric mean of 1 (the interval straddles it); B's extra seed has no twin."""
+    import json
+
+    a = {("x1", s): n for s, n in enumerate([100, 200, 400, 800])}
+    a |= {("y1", s): 100 for s in range(6)}
+    b = {("x1", s): n // 2 for s, n in enumerate([100, 200, 400, 800])} | {("x1", 9): 5}
+    b |= {("y1", s): n for s, n in enumerate([400, 25, 400, 25, 400, 25])}
+    _batch(tmp_path / "a", "/a/peg.yaml", a), _batch(tmp_path / "b", "/b/peg-copy.yaml", b)
+    apart = run_script("ab.py", str(tmp_path / "a"), str(tmp_path / "b"))
+    assert apart.returncode == 1 and apart.stderr.count("\n") == 1
+    assert "--ignore-task" in apart.stderr  # the tasks' paths differ: no pairs by task
+    run = run_script("ab.py", str(tmp_path / "a"), str(tmp_path / "b"), "--ignore-task")
+    assert run.returncode == 0, run.stderr
+    assert "| x1 bilba-variable | 4 | 4/4, 4 verified → 4/4, 4 verified | 3.0 → 1.5 | " \
+        "0.50 [0.50, 0.50] |" in run.stdout  # fmt: skip
+    y1 = next(x for x in run.stdout.splitlines() if x.startswith("| y1 "))
+    low, high = (float(v) for v in y1.split("[")[1].split("]")[0].split(", "))
+    assert y1.split("|")[5].strip().startswith("1.00") and low < 1 < high
+    figures = json.loads(run.stdout.strip().splitlines()[-1])
+    assert figures["pairs"] == 10 and figures["rollouts"] == [2100, 750 + 1275]
+    assert figures["geomean_ratio"][0] == round(0.5 ** (4 / 10), 3)  # x1's 4 halved, y1's 6 at 1
+
+
+@pytest.mark.parametrize("args", [["missing"], ["a", "--seed", "-1"]])
+def test_ab_refuses_a_folder_without_records_in_one_line(tmp_path, args):
+    _batch(tmp_path / "a", "peg-in-hole", {("x1", 0): 10})
+    run = run_script("ab.py", str(tmp_path / "a"), *(str(tmp_path / x) for x in args[:1]),
+                     *args[1:])  # fmt: skip
+    assert run.returncode != 0 and run.stderr.count("\n") == 1 and "Traceback" not in run.stderr
