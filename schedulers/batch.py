@@ -235,11 +235,16 @@ def run_batch(
 
 def error_result(exc: Exception) -> dict[str, Any]:
     """The record of a job that raised: the job's own exception and where (Ray wraps it in a
-    RayTaskError whose text opens with colour codes), its traceback kept for a bug report."""
+    RayTaskError whose text opens with colour codes), its traceback kept for a bug report.
+
+    ``ray.get`` raises the wrapper as an instance of the job's exception class too, an
+    object without ``traceback_str`` (asking for it asks the job's exception): its text is
+    the traceback."""
     import ray
 
     if isinstance(exc, ray.exceptions.RayTaskError) and exc.cause is not None:
-        trace = re.sub(r"\x1b\[[0-9;]*m", "", exc.traceback_str).strip().splitlines()
+        text = str(exc)
+        trace = re.sub(r"\x1b\[[0-9;]*m", "", text).strip().splitlines()
         return {**_error_line(exc.cause), "traceback": trace[-TRACEBACK_LINES:]}
     return _error_line(exc)
 

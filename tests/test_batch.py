@@ -326,11 +326,13 @@ def test_a_job_that_raised_is_recorded_with_its_own_exception_and_traceback():
         f'  File "evaluate.py", line {k}, in score' for k in range(20)
     )
     wrapped = ray.exceptions.RayTaskError("execute_job", trace, IndexError("tuple index"))
-    record = error_result(wrapped)
-    assert record["status"] == "error" and record["reason"] == "IndexError: tuple index"
-    assert record["traceback"][-1] == '  File "evaluate.py", line 19, in score'
-    assert len(record["traceback"]) == TRACEBACK_LINES
-    assert not any("\x1b" in line for line in record["traceback"])
+    # ray.get raises it as an IndexError too (one without traceback_str): the same record
+    for raised in (wrapped, wrapped.as_instanceof_cause()):
+        record = error_result(raised)
+        assert record["status"] == "error" and record["reason"] == "IndexError: tuple index"
+        assert record["traceback"][-1] == '  File "evaluate.py", line 19, in score'
+        assert len(record["traceback"]) == TRACEBACK_LINES
+        assert not any("\x1b" in line for line in record["traceback"])
     long = ray.exceptions.RayTaskError("execute_job", trace, ValueError("first\nsecond"))
     assert error_result(long)["reason"] == "ValueError: first"
     lost = error_result(ray.exceptions.RayError("the node died\nmore"))

@@ -108,6 +108,23 @@ def test_guesses_not_asked_for_are_dropped_and_one_actor_does_not_guess(local_ra
     pool.close()
 
 
+def test_a_job_that_raised_on_ray_becomes_an_error_record(local_ray):
+    """What ``ray.get`` raises for a job's own exception (Ray's class that is both the
+    wrapper and the job's exception) is recorded, as `bilba batch` records a failed job,
+    rather than ending the batch."""
+    from bilba_dist.schedulers.batch import error_result
+
+    @ray.remote
+    def job() -> None:
+        raise AttributeError("'Belief' object has no attribute 'under'")
+
+    with pytest.raises(ray.exceptions.RayTaskError) as raised:
+        ray.get(job.remote())
+    record = error_result(raised.value)
+    assert record["reason"] == "AttributeError: 'Belief' object has no attribute 'under'"
+    assert any("in job" in line for line in record["traceback"])
+
+
 def test_killing_a_worker_process_mid_plan_still_gives_the_same_plan(local_ray):
     """The actor restarts (re-running its constructor) and its lost rollouts are retried."""
     import os
