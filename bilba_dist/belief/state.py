@@ -12,7 +12,7 @@ import pinocchio as pin
 
 from bilba_dist.belief.particles import Particle
 from bilba_dist.geometry.contact import ContactPair, ContactSet
-from bilba_dist.rollout import ParticleState, RolloutResult
+from bilba_dist.rollout import Motion, ParticleState, RolloutRequest, RolloutResult
 
 #: Weight of the contact-homogeneity term; in (0, 1) so it only breaks ties in the count.
 LAMBDA = 0.5
@@ -41,6 +41,12 @@ class Belief:
             tuple(r.state for r in results),
             tuple(r.contacts for r in results),
         )
+
+    def under(self, motion: Motion) -> list[RolloutRequest]:
+        """The rollouts of ``motion`` from every particle's state (``after`` reads them)."""
+        return [
+            RolloutRequest(p, s, motion) for p, s in zip(self.particles, self.states, strict=True)
+        ]
 
     def with_check(self, check: "Belief | None") -> "Belief":
         return replace(self, check=check)

@@ -46,7 +46,7 @@ from bilba_dist.planning.verify import (
     within_budget,
 )
 from bilba_dist.robot.panda import PandaModel
-from bilba_dist.rollout import RolloutBackend, RolloutRequest, require_world
+from bilba_dist.rollout import RolloutBackend, require_world
 from bilba_dist.task.loader import Task
 
 Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
@@ -335,11 +335,7 @@ def resume_at(
     done = 0
     for k in range(1, len(reached) - 1):
         for step in steps[done : reached[k].steps]:
-            requests = [
-                RolloutRequest(p, st, step.motion)
-                for p, st in zip(extra.particles, extra.states, strict=True)
-            ]
-            extra = extra.after(search.evaluator.simulate(requests))
+            extra = extra.after(search.evaluator.simulate(extra.under(step.motion)))
         done = reached[k].steps
         later = frozenset(r.mode for r in reached[k:])
         if extra.count(later) == len(extra):

@@ -11,7 +11,7 @@ from bilba_dist.belief.particles import Particle, initial_belief, make_particle,
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion
-from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest, require_world
+from bilba_dist.rollout import Motion, RolloutBackend, require_world
 from bilba_dist.task.loader import Task
 from bilba_dist.task.schema import ANGULAR_AXES, PHYSICAL_AXES
 
@@ -28,11 +28,7 @@ def run_motions(
     belief = start_belief(task, particles)
     for planned in motions:
         motion = Motion(planned.K, planned.G_d, planned.timeout_s)
-        requests = [
-            RolloutRequest(p, s, motion)
-            for p, s in zip(belief.particles, belief.states, strict=True)
-        ]
-        belief = belief.after(backend.simulate(requests))
+        belief = belief.after(backend.simulate(belief.under(motion)))
         yield belief
 
 
