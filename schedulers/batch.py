@@ -243,8 +243,7 @@ def error_result(exc: Exception) -> dict[str, Any]:
     import ray
 
     if isinstance(exc, ray.exceptions.RayTaskError) and exc.cause is not None:
-        text = str(exc)
-        trace = re.sub(r"\x1b\[[0-9;]*m", "", text).strip().splitlines()
+        trace = re.sub(r"\x1b\[[0-9;]*m", "", str(exc)).strip().splitlines()
         return {**_error_line(exc.cause), "traceback": trace[-TRACEBACK_LINES:]}
     return _error_line(exc)
 
