@@ -83,9 +83,16 @@ def median_time(records: list[dict[str, Any]]) -> str:
     return f"{statistics.median(times):.1f}" if times else "–"
 
 
+def tally(records: list[dict[str, Any]]) -> tuple[int, int]:
+    """Plans found, and plans that passed verification."""
+    return (
+        sum(r["status"] == "success" for r in records),
+        sum(bool(r.get("verified")) for r in records),
+    )
+
+
 def counts(records: list[dict[str, Any]]) -> str:
-    plans = sum(r["status"] == "success" for r in records)
-    verified = sum(bool(r.get("verified")) for r in records)
+    plans, verified = tally(records)
     return f"{plans}/{len(records)}, {verified} verified"
 
 
@@ -100,7 +107,7 @@ def table(matched: dict, seed: int) -> tuple[list[str], dict[str, Any]]:
     for cell, keys in sorted(cells.items()):
         a, b = [matched[k][0] for k in keys], [matched[k][1] for k in keys]
         x, y = _rollouts(a), _rollouts(b)
-        censored = any(r.get("status") == "timeout" for r in b)
+        censored = any(r["status"] == "timeout" for r in b)
         lines.append(
             f"| {' '.join(cell)} | {len(keys)} | {counts(a)} → {counts(b)} | "
             f"{median_time(a)} → {median_time(b)} | "
@@ -117,8 +124,8 @@ def table(matched: dict, seed: int) -> tuple[list[str], dict[str, Any]]:
     ]
     figures = {
         "pairs": len(matched),
-        "plans": [sum(r["status"] == "success" for r in side) for side in (a, b)],
-        "verified": [sum(bool(r.get("verified")) for r in side) for side in (a, b)],
+        "plans": [tally(a)[0], tally(b)[0]],
+        "verified": [tally(a)[1], tally(b)[1]],
         "rollouts": [int(x.sum()), int(y.sum())],
         "total_ratio": [round(v, 3) for v in tot],
         "geomean_ratio": [round(v, 3) for v in geo],
