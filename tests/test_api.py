@@ -54,3 +54,18 @@ def test_example_runs_and_writes_a_plan_and_a_log(script, tmp_path):
     assert json.loads(plan.read_text())["success"] is True
     (log,) = tmp_path.glob("*.mcap")
     assert len(read_log(log).json("/transition")) >= 1
+
+
+def test_file_functions_take_str_paths_as_well_as_paths(default_plan_file, tmp_path):
+    """A Python user passes a path as a string as often as a `Path`."""
+    from bilba_dist import LogWriter, dumps, read_log, read_plan, write_plan
+
+    plan = read_plan(str(default_plan_file))
+    assert plan.motions
+    copy = tmp_path / "sub" / "copy.json"
+    write_plan(json.loads(default_plan_file.read_text()), str(copy))
+    assert [m.G_d for m in read_plan(copy).motions] == [m.G_d for m in plan.motions]
+    log_path = tmp_path / "logs" / "log.mcap"
+    log = LogWriter(str(log_path), plan.task(), "bilba-variable", seed=0)
+    log.finish(dumps(json.loads(copy.read_text())), {"success": True})
+    assert read_log(str(log_path)).json("/metadata")[0]["seed"] == 0

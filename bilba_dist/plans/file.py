@@ -13,6 +13,7 @@ import json
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -131,12 +132,13 @@ def dumps(document: dict[str, Any]) -> str:
     return json.dumps(document, indent=2, sort_keys=True) + "\n"
 
 
-def write_plan(document: dict[str, Any], path: Path) -> None:
+def write_plan(document: dict[str, Any], path: str | PathLike[str]) -> None:
     write_plan_text(dumps(document), path)
 
 
-def write_plan_text(text: str, path: Path) -> None:
+def write_plan_text(text: str, path: str | PathLike[str]) -> None:
     """A plan file's text (``dumps`` of its document, e.g. from a Ray task) at ``path``."""
+    path = Path(path)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text, encoding="utf-8")
@@ -188,8 +190,9 @@ def _no_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number a plan may hold")
 
 
-def read_plan(path: Path) -> PlanFile:
+def read_plan(path: str | PathLike[str]) -> PlanFile:
     """Read and check a plan file; any problem is one BilbaError line naming the file."""
+    path = Path(path)
     text = read_text(path, "plan file", MAX_PLAN_BYTES)
     try:
         document = json.loads(text, object_pairs_hook=_no_duplicates, parse_constant=_no_constant)

@@ -4,6 +4,7 @@ import json
 from collections import defaultdict
 from dataclasses import dataclass, field
 from functools import cached_property
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -50,8 +51,9 @@ def _open(path: Path) -> bytes:
     return data
 
 
-def read_log(path: Path) -> Log:
+def read_log(path: str | PathLike[str]) -> Log:
     """Every message of a complete log, CRCs checked."""
+    path = Path(path)
     _open(path)
     log = Log(path)
     try:

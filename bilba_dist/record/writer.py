@@ -12,6 +12,7 @@ import json
 import platform
 import time
 from importlib import metadata
+from os import PathLike
 from pathlib import Path
 from typing import IO, Any
 
@@ -57,9 +58,12 @@ def versions() -> dict[str, str]:
 class LogWriter:
     """One MCAP file per planning job; implements the planner's recorder hooks."""
 
-    def __init__(self, path: Path, task: Task, planner: str, seed: int, robot: bool = True) -> None:
+    def __init__(
+        self, path: str | PathLike[str], task: Task, planner: str, seed: int, robot: bool = True
+    ) -> None:
         """``robot``: draw the Panda in the scene (its particles' joint angles are meaningful
         only on the Panda model)."""
+        path = Path(path)
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             self._file: IO[bytes] = path.open("wb")
