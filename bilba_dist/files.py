@@ -3,9 +3,13 @@ is opened: /dev/zero never ends, a FIFO blocks), at most ``limit`` bytes, and on
 a traceback, when it cannot be read."""
 
 import stat
+from os import PathLike
 from pathlib import Path
 
 from bilba_dist.errors import BilbaError
+
+#: A path the Python API takes: a `str` as well as a `Path`.
+PathArg = str | PathLike[str]
 
 
 def read_bytes(

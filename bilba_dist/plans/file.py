@@ -13,7 +13,6 @@ import json
 from dataclasses import dataclass
 from functools import cache
 from importlib import resources
-from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,7 @@ from pydantic import ValidationError
 
 from bilba_dist import __version__
 from bilba_dist.errors import BilbaError
+from bilba_dist.files import PathArg
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_json, setpoint_json
 from bilba_dist.planning.result import PlannedMotion, PlanResult, verification_json
@@ -132,11 +132,11 @@ def dumps(document: dict[str, Any]) -> str:
     return json.dumps(document, indent=2, sort_keys=True) + "\n"
 
 
-def write_plan(document: dict[str, Any], path: str | PathLike[str]) -> None:
+def write_plan(document: dict[str, Any], path: PathArg) -> None:
     write_plan_text(dumps(document), path)
 
 
-def write_plan_text(text: str, path: str | PathLike[str]) -> None:
+def write_plan_text(text: str, path: PathArg) -> None:
     """A plan file's text (``dumps`` of its document, e.g. from a Ray task) at ``path``."""
     path = Path(path)
     try:
@@ -190,7 +190,7 @@ def _no_constant(name: str) -> float:
     raise ValueError(f"{name} is not a number a plan may hold")
 
 
-def read_plan(path: str | PathLike[str]) -> PlanFile:
+def read_plan(path: PathArg) -> PlanFile:
     """Read and check a plan file; any problem is one BilbaError line naming the file."""
     path = Path(path)
     text = read_text(path, "plan file", MAX_PLAN_BYTES)

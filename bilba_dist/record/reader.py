@@ -4,7 +4,6 @@ import json
 from collections import defaultdict
 from dataclasses import dataclass, field
 from functools import cached_property
-from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +13,7 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from bilba_dist.errors import BilbaError
-from bilba_dist.files import read_bytes
+from bilba_dist.files import PathArg, read_bytes
 
 MAGIC = b"\x89MCAP0\r\n"
 
@@ -51,7 +50,7 @@ def _open(path: Path) -> bytes:
     return data
 
 
-def read_log(path: str | PathLike[str]) -> Log:
+def read_log(path: PathArg) -> Log:
     """Every message of a complete log, CRCs checked."""
     path = Path(path)
     _open(path)

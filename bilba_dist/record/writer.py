@@ -12,7 +12,6 @@ import json
 import platform
 import time
 from importlib import metadata
-from os import PathLike
 from pathlib import Path
 from typing import IO, Any
 
@@ -21,6 +20,7 @@ from mcap.writer import CompressionType, Writer
 
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
+from bilba_dist.files import PathArg
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.pose import pose_json, setpoint_json
 from bilba_dist.planning.result import Verification, verification_json
@@ -59,7 +59,7 @@ class LogWriter:
     """One MCAP file per planning job; implements the planner's recorder hooks."""
 
     def __init__(
-        self, path: str | PathLike[str], task: Task, planner: str, seed: int, robot: bool = True
+        self, path: PathArg, task: Task, planner: str, seed: int, robot: bool = True
     ) -> None:
         """``robot``: draw the Panda in the scene (its particles' joint angles are meaningful
         only on the Panda model)."""
