@@ -182,18 +182,26 @@ def test_plan_file_keeps_the_simulated_rotation_exactly(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("rotation", "message"),
+    ("key", "value", "message"),
     [
-        ([[1, 0, 0], [0, 1, 0]], "at motions/0/G_d/rotation: [[1, 0, 0], [0, 1, 0]] is too short"),
-        ([[2, 0, 0], [0, 1, 0], [0, 0, 1]], "must be a 3x3 rotation matrix"),
-        ([[1, 0, 0], [0, -1, 0], [0, 0, -1]], "rotation and quat_xyzw disagree"),
+        (
+            "rotation",
+            [[1, 0, 0], [0, 1, 0]],
+            "at motions/0/G_d/rotation: [[1, 0, 0], [0, 1, 0]] is too short",
+        ),
+        ("rotation", [[2, 0, 0], [0, 1, 0], [0, 0, 1]], "must be a 3x3 rotation matrix"),
+        # 1e308 overflowed R.T @ R and printed numpy's warning above the error line
+        ("rotation", [[1e308, 0, 0], [0, 1, 0], [0, 0, 1]], "must be a 3x3 rotation matrix"),
+        ("rotation", [[1, 0, 0], [0, -1, 0], [0, 0, -1]], "rotation and quat_xyzw disagree"),
+        ("quat_xyzw", [1e308, 1e308, 0, 0], "quat_xyzw must be a unit quaternion"),
     ],
 )
-def test_validate_rejects_a_bad_setpoint_rotation(rotation, message, tmp_path):
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # a numpy warning is a second line
+def test_validate_rejects_a_bad_setpoint_rotation(key, value, message, tmp_path):
     register()
     path = _one_motion_plan(tmp_path, np.eye(3))
     document = json.loads(path.read_text())
-    document["motions"][0]["G_d"]["rotation"] = rotation
+    document["motions"][0]["G_d"][key] = value
     path.write_text(json.dumps(document))
     result = CliRunner().invoke(cli, ["validate", str(path), "--workers", "0"])
     assert result.exit_code == 2

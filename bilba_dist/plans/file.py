@@ -298,14 +298,19 @@ def _rotation(G_d: dict[str, Any]) -> np.ndarray:
     moves it by up to ~1e-11, and the puzzle's 0.25 mm clearances turn a 1e-9 m change of
     setpoint into a different contact), else the quaternion's; both must agree."""
     xyzw = _array(G_d["quat_xyzw"], (4,), "G_d.quat_xyzw")
-    if np.linalg.norm(xyzw) < 0.5:
+    if not (np.abs(xyzw) <= 2).all() or np.linalg.norm(xyzw) < 0.5:  # 1e308 overflows norm
         raise ValueError("G_d.quat_xyzw must be a unit quaternion")
     quat = pin.Quaternion(xyzw)  # x, y, z, w
     quat.normalize()
     if "rotation" not in G_d:
         return quat.matrix()
-    R = np.array(G_d["rotation"], dtype=float)  # NaN fails the allclose below
-    if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=ROTATION_TOL):
+    R = np.array(G_d["rotation"], dtype=float)
+    # entries past ±1 (or NaN) are refused before R.T @ R, which 1e308 would overflow
+    if (
+        R.shape != (3, 3)
+        or not (np.abs(R) <= 1 + ROTATION_TOL).all()
+        or not np.allclose(R.T @ R, np.eye(3), atol=ROTATION_TOL)
+    ):
         raise ValueError("G_d rotation must be a 3x3 rotation matrix")
     if not np.allclose(R, quat.matrix(), atol=ROTATION_TOL):
         raise ValueError("G_d rotation and quat_xyzw disagree")
