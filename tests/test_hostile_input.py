@@ -76,6 +76,10 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
         edited("friction: 0.45", "friction: " + "9" * 5000),
         "not valid YAML: Exceeds the limit (4300 digits)",
     ),
+    "preset a list": (
+        edited("# No planner section", "planner: {preset: [paper]}\n# No planner section"),
+        "planner.preset",
+    ),
     "angle in words": (
         edited("rpy: [180deg, 0, 0]}       # X_GM", "rpy: [half, 0, 0]}       # X_GM"),
         "cannot read 'half' as an angle",
@@ -280,6 +284,99 @@ def test_the_installed_command_refuses_fast(case, tmp_path):
     assert time.perf_counter() - start < 5.0
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and fragment in done.stderr
     assert list(tmp_path.iterdir()) == [path]
+
+
+def rewritten_log(source: Path, target: Path, topic: str, edit) -> Path:
+    """``source`` with the first message on ``topic`` replaced by ``edit(its bytes)``: a
+    valid MCAP file (CRCs right) whose message is not as bilba writes it."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, Writer
+
+    with source.open("rb") as f, target.open("wb") as out:
+        writer = Writer(out, compression=CompressionType.NONE)
+        writer.start(profile="bilba", library="test")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        done = False
+        for schema, channel, message in make_reader(f).iter_messages():
+            if schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(
+                    schema.name, schema.encoding, schema.data
+                )
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.id]
+                )
+            data = message.data
+            if channel.topic == topic and not done:
+                data, done = edit(data), True
+            writer.add_message(channels[channel.id], message.log_time, data, message.publish_time)
+        writer.finish()
+    assert done, topic
+    return target
+
+
+def _with(key: str, value: object):
+    return lambda data: json.dumps({**json.loads(data), key: value}).encode()
+
+
+#: a log message edited -> (topic, the edit, a fragment of the one line)
+LOG_EDITS = {
+    "truncated": (
+        "/transition",
+        lambda d: d[: len(d) // 2],
+        "message 0 on /transition is not JSON",
+    ),
+    "particles a number": ("/transition", _with("after", 3.5), "at after: 3.5 is not of type"),
+    "task without a name": ("/metadata", _with("task", {}), "'name' is a required property"),
+    "outcome a list": ("/outcome", lambda d: b"[1, 2]", "on /outcome, at the message"),
+}
+#: (edit, the command that reads what was edited)
+LOG_CASES = [
+    *((e, c) for e in ("truncated", "particles a number") for c in ("show", "csv", "plot")),
+    ("truncated", "ndjson"),
+    ("task without a name", "summary"),
+    ("outcome a list", "summary"),
+]
+LOG_COMMANDS = {
+    "show": ["show", "--step", "0"],
+    "csv": ["export", "--format", "csv", "--out", "out.csv"],
+    "ndjson": ["export", "--out", "out.ndjson"],
+    "plot": ["plot", "--out", "out.png"],
+    "summary": ["summary"],
+}
+
+
+@pytest.mark.parametrize(("edit", "command"), LOG_CASES)
+def test_a_log_whose_messages_bilba_did_not_write_is_one_line(
+    edit, command, plan_and_log, tmp_path, monkeypatch
+):
+    """A valid MCAP file (CRCs right) whose message is not JSON, or JSON of another shape:
+    the readers index messages unchecked and, where one fails, name the message that does
+    not match its topic's schema; before, a KeyError or TypeError was an internal error."""
+    topic, change, fragment = LOG_EDITS[edit]
+    log = rewritten_log(plan_and_log / "l.mcap", tmp_path / "bad.mcap", topic, change)
+    monkeypatch.chdir(tmp_path)
+    name, *args = LOG_COMMANDS[command]
+    assert_one_line_exit_2(run_cli("logs", name, str(log), *args), fragment, 0.0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]  # no output written
+
+
+def test_an_unchanged_log_reads_in_every_command(plan_and_log, tmp_path, monkeypatch):
+    """The control: the same rewrite with nothing edited reads everywhere."""
+    log = rewritten_log(plan_and_log / "l.mcap", tmp_path / "same.mcap", "/transition", bytes)
+    monkeypatch.chdir(tmp_path)
+    for name, *args in LOG_COMMANDS.values():
+        result = run_cli("logs", name, str(log), *args)
+        assert result.exit_code == 0, (name, result.output)
+
+
+def test_a_reader_failing_on_a_log_bilba_wrote_is_a_bug_not_a_bad_log(plan_and_log):
+    """Every message matches its schema: the reader's own error goes through as it is."""
+    from bilba_dist.record.reader import read_log, reading
+
+    with pytest.raises(KeyError, match="no_such_field"), reading(read_log(plan_and_log / "l.mcap")):
+        raise KeyError("no_such_field")
 
 
 #: command (paths relative to the folder above) -> a fragment of the one line

@@ -10,7 +10,7 @@ from bilba_dist.cli.outputs import make_folder, refuse_overwriting, write_output
 from bilba_dist.errors import BilbaError
 from bilba_dist.record import inspect
 from bilba_dist.record.inspect import mode_text
-from bilba_dist.record.reader import read_log, recover
+from bilba_dist.record.reader import Log, read_log, reading, recover
 
 
 @click.group("logs")
@@ -28,26 +28,31 @@ def summary(files: tuple[Path, ...]) -> None:
         f"{'trans':>6} {'sched':>5}  outcome"
     )
     for k, path in enumerate(files):
-        log = read_log(path)  # before the header: a bad first file prints only its error
-        if k == 0:
-            click.echo(header)
-        meta = log.metadata
-        outcome = (log.json("/outcome") or [{}])[-1]
-        if not outcome:
-            status = "unfinished"
-        elif outcome["success"]:
-            status = "plan found"
-        else:
-            status = f"no plan: {outcome['reason']}"
-        seconds = outcome.get("planning_time_s", float("nan"))
-        transitions = len(log.messages["/transition"])
-        click.echo(
-            f"{path.name:<40} {meta['task']['name']:<12} {meta['planner']:<15} {meta['seed']:>4} "
-            f"{seconds:7.1f} {transitions:>6} {len(log.messages['/schedule']):>5}  {status}"
-        )
-        if len(files) == 1:
-            for k, s in enumerate(log.json("/schedule")):
-                click.echo(f"  schedule {k}: " + " -> ".join(map(mode_text, s["schedule"])))
+        with reading(read_log(path)) as log:
+            rows = _summary_rows(log, path, len(files) == 1)
+        # each file's rows only once it has read whole: a bad file prints its error alone
+        click.echo("\n".join([header, *rows] if k == 0 else rows))
+
+
+def _summary_rows(log: Log, path: Path, schedules: bool) -> list[str]:
+    meta = log.metadata
+    outcome = (log.json("/outcome") or [{}])[-1]
+    if not outcome:
+        status = "unfinished"
+    elif outcome["success"]:
+        status = "plan found"
+    else:
+        status = f"no plan: {outcome['reason']}"
+    seconds = outcome.get("planning_time_s", float("nan"))
+    transitions = len(log.messages["/transition"])
+    rows = [
+        f"{path.name:<40} {meta['task']['name']:<12} {meta['planner']:<15} {meta['seed']:>4} "
+        f"{seconds:7.1f} {transitions:>6} {len(log.messages['/schedule']):>5}  {status}"
+    ]
+    if schedules:
+        for k, s in enumerate(log.json("/schedule")):
+            rows.append(f"  schedule {k}: " + " -> ".join(map(mode_text, s["schedule"])))
+    return rows
 
 
 @logs.command("plan")
@@ -92,7 +97,8 @@ def recover_command(file: Path, out: Path | None) -> None:
 @user_errors
 def show(file: Path, step: int) -> None:
     """The particles, contacts and motion of one transition."""
-    click.echo(inspect.show(read_log(file), step))
+    with reading(read_log(file)) as log:
+        click.echo(inspect.show(log, step))
 
 
 @logs.command()
@@ -104,7 +110,8 @@ def plot(file: Path, out: Path | None) -> None:
     out = out or file.with_suffix(".png")
     refuse_overwriting({"--out": out}, {"the log": file})
     make_folder(out)
-    inspect.plot(read_log(file), out)
+    with reading(read_log(file)) as log:
+        inspect.plot(log, out)
     click.echo(f"{out}")
 
 
@@ -118,7 +125,8 @@ def plot(file: Path, out: Path | None) -> None:
 def export(file: Path, fmt: str, out: Path | None) -> None:
     """Every message as JSON lines, or one CSV row per transition and particle."""
     refuse_overwriting({"--out": out}, {"the log": file})
-    text = inspect.export(read_log(file), fmt)
+    with reading(read_log(file)) as log:
+        text = inspect.export(log, fmt)
     if out is None:
         click.echo(text, nl=False)
     else:

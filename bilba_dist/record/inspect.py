@@ -122,10 +122,13 @@ def export(log: Log, fmt: str) -> str:
     """ndjson: every message with its topic and log time, in file order. csv: one row per
     transition and particle (positions in metres, world frame)."""
     if fmt == "ndjson":
-        return "".join(
-            json.dumps({"topic": topic, "log_time_ns": ns, "message": json.loads(data)}) + "\n"
-            for topic, ns, data in log.records
-        )
+        seen: dict[str, int] = {}
+        lines = []
+        for topic, ns, data in log.records:
+            k = seen[topic] = seen.get(topic, -1) + 1
+            message = log.decode(topic, k, data)
+            lines.append(json.dumps({"topic": topic, "log_time_ns": ns, "message": message}))
+        return "".join(line + "\n" for line in lines)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)

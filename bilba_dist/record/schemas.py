@@ -58,7 +58,11 @@ def _object(properties: dict[str, Any], title: str) -> dict[str, Any]:
 TOPICS: dict[str, dict[str, Any]] = {
     "/metadata": _object(
         {
-            "task": {"type": "object"},
+            "task": {
+                "type": "object",
+                "properties": {"name": {"type": "string"}},
+                "required": ["name"],
+            },
             "planner": {"type": "string"},
             "parameters": {"type": "object"},
             "seed": {"type": "integer"},

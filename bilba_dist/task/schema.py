@@ -194,8 +194,9 @@ class PlannerParams(Strict):
     @model_validator(mode="before")
     @classmethod
     def _apply_preset(cls, data: Any) -> Any:
-        if isinstance(data, dict) and data.get("preset") in PRESETS:
-            return {**PRESETS[data["preset"]], **data}
+        preset = data.get("preset") if isinstance(data, dict) else None
+        if isinstance(preset, str) and preset in PRESETS:  # a list is unhashable: a TypeError
+            return {**PRESETS[preset], **data}  # pydantic would not report, but re-raise
         return data
 
     n_free: int = Field(default=3, ge=1, le=100)
