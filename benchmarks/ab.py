@@ -122,10 +122,11 @@ def table(matched: dict, seed: int) -> tuple[list[str], dict[str, Any]]:
         f"{int(x.sum())} → {int(y.sum())}, total B / A {shown(*tot, False)}, "
         f"geomean {shown(*geo, False)}",
     ]
+    (plans_a, verified_a), (plans_b, verified_b) = tally(a), tally(b)
     figures = {
         "pairs": len(matched),
-        "plans": [tally(a)[0], tally(b)[0]],
-        "verified": [tally(a)[1], tally(b)[1]],
+        "plans": [plans_a, plans_b],
+        "verified": [verified_a, verified_b],
         "rollouts": [int(x.sum()), int(y.sum())],
         "total_ratio": [round(v, 3) for v in tot],
         "geomean_ratio": [round(v, 3) for v in geo],

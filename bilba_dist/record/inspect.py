@@ -122,13 +122,11 @@ def export(log: Log, fmt: str) -> str:
     """ndjson: every message with its topic and log time, in file order. csv: one row per
     transition and particle (positions in metres, world frame)."""
     if fmt == "ndjson":
-        seen: dict[str, int] = {}
-        lines = []
-        for topic, ns, data in log.records:
-            k = seen[topic] = seen.get(topic, -1) + 1
-            message = log.decode(topic, k, data)
-            lines.append(json.dumps({"topic": topic, "log_time_ns": ns, "message": message}))
-        return "".join(line + "\n" for line in lines)
+        decoded = {topic: iter(log.json(topic)) for topic in log.messages}  # file order
+        return "".join(
+            json.dumps({"topic": topic, "log_time_ns": ns, "message": next(decoded[topic])}) + "\n"
+            for topic, ns, _ in log.records
+        )
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(CSV_COLUMNS)

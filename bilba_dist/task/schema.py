@@ -195,8 +195,9 @@ class PlannerParams(Strict):
     @classmethod
     def _apply_preset(cls, data: Any) -> Any:
         preset = data.get("preset") if isinstance(data, dict) else None
-        if isinstance(preset, str) and preset in PRESETS:  # a list is unhashable: a TypeError
-            return {**PRESETS[preset], **data}  # pydantic would not report, but re-raise
+        # `preset in PRESETS` on a list raises TypeError, which pydantic passes through
+        if isinstance(preset, str) and preset in PRESETS:
+            return {**PRESETS[preset], **data}
         return data
 
     n_free: int = Field(default=3, ge=1, le=100)
