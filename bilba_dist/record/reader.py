@@ -42,11 +42,11 @@ class Log:
         """The messages of ``topic``, decoded (each once)."""
         if topic not in self._decoded:
             self._decoded[topic] = [
-                self.decode(topic, k, data) for k, data in enumerate(self.messages.get(topic, []))
+                self._decode(topic, k, data) for k, data in enumerate(self.messages.get(topic, []))
             ]
         return self._decoded[topic]
 
-    def decode(self, topic: str, k: int, data: bytes) -> Any:
+    def _decode(self, topic: str, k: int, data: bytes) -> Any:
         """Message ``k`` of ``topic``; one BilbaError line when it is not JSON."""
         try:
             return json.loads(data)
