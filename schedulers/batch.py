@@ -9,7 +9,8 @@ whose node or worker process died (``max_retries``); a seeded plan comes out the
 
 ``DIR/records.jsonl`` is appended and fsynced per job; ``--resume`` skips every job with a
 record and runs the rest (those never started and those interrupted). A torn last line (a
-killed driver) is ignored and that job runs again.
+killed driver) is ignored and that job runs again. When Ray itself dies under the driver (its
+local raylet), the batch stops with one line and records nothing for the jobs left.
 """
 
 import json
@@ -222,6 +223,8 @@ def run_batch(
                 job = pending.pop(ref)
                 try:
                     result = ray.get(ref)
+                except ray.exceptions.LocalRayletDiedError:
+                    raise _ray_lost(out, counts, len(pending) + 1) from None
                 except ray.exceptions.RayError as exc:
                     result = error_result(exc)
                 _append(out, _store(out, job, result))
@@ -231,6 +234,16 @@ def run_batch(
         counts.elapsed_s = time.perf_counter() - started
         on_progress(counts)
     return counts
+
+
+def _ray_lost(out: Path, counts: Counts, left: int) -> BilbaError:
+    """Ray itself is gone (this machine's raylet died: `ray stop`, the OOM killer), not the
+    job: every pending job would fail the same way, so none is recorded and ``--resume`` runs
+    them."""
+    return BilbaError(
+        f"Ray's local raylet died after {counts.skipped + counts.done} of {counts.total} jobs "
+        f"were recorded in {out}; the other {left} were not run: rerun with --resume"
+    )
 
 
 def error_result(exc: Exception) -> dict[str, Any]:
@@ -271,7 +284,7 @@ def progress_bar(total: int) -> tuple[Callable[[Counts], None], Callable[[], Non
         bar.update(counts.skipped + counts.done - bar.n)
 
     def close() -> None:
-        for bar in bars:
-            bar.close()
+        while bars:
+            bars.pop().close()
 
     return update, close

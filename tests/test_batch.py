@@ -337,3 +337,29 @@ def test_a_job_that_raised_is_recorded_with_its_own_exception_and_traceback():
     assert error_result(long)["reason"] == "ValueError: first"
     lost = error_result(ray.exceptions.RayError("the node died\nmore"))
     assert lost == {"status": "error", "reason": "RayError: the node died"}
+
+
+def test_a_batch_whose_ray_dies_stops_in_one_line_and_records_no_job_it_did_not_run(tmp_path):
+    """`ray stop` or the OOM killer takes the local raylet: the jobs left are not errors of
+    theirs, so none is recorded and --resume runs them."""
+    import psutil
+
+    out = tmp_path / "out"
+    driver = subprocess.Popen(
+        [BIN / "bilba", "batch", SLOW_SMOKE, "--out", out, "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_records(out, 1)
+    (raylet,) = (p for p in psutil.Process(driver.pid).children(True) if p.name() == "raylet")
+    raylet.kill()
+    _, err = driver.communicate(timeout=120)
+    records = read_records(out)
+    assert driver.returncode == 2 and "Traceback" not in err
+    (line,) = (x for x in err.splitlines() if x.startswith("bilba: error:"))
+    assert f"raylet died after {len(records)} of 4 jobs" in line and "--resume" in line
+    assert records and all(r["status"] == "success" for r in records)
+    resumed = run("batch", str(SLOW_SMOKE), "--out", str(out), "--resume")
+    assert resumed.exit_code == 0 and f"{4 - len(records)} jobs run" in resumed.output
+    assert len(read_records(out)) == 4

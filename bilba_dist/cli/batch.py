@@ -51,7 +51,8 @@ def batch(
             f"interrupted; finished jobs are recorded in {out}; rerun with --resume", err=True
         )
         sys.exit(EXIT_INTERRUPTED)
-    close()
+    finally:
+        close()  # before an error's one line
     click.echo(
         f"{out}: {counts.done} jobs run in {counts.elapsed_s:.0f} s "
         f"({counts.failed} without a plan), {counts.skipped} already recorded, "
