@@ -20,7 +20,7 @@ from mcap.records import MessageIndex
 import bilba_dist.record
 from bilba_dist.cli.main import cli, register
 from bilba_dist.record.foxglove import PRIMITIVES
-from bilba_dist.record.reader import read_log
+from bilba_dist.record.reader import MAGIC, read_log
 from bilba_dist.robot.panda import PandaModel
 
 
@@ -159,7 +159,32 @@ def test_killed_planner_loses_at_most_the_transition_in_progress(tmp_path):
     assert indexed_messages(fixed)["/transition"] == len(transitions)
 
 
-@pytest.mark.parametrize("case", ["missing", "empty", "text", "truncated"])
+def record_at(data: bytes, opcode: int) -> int:
+    """Where the first record of ``opcode`` starts (MCAP records: an opcode, a u64 length,
+    the content)."""
+    at = len(MAGIC)
+    while data[at] != opcode:
+        at += 9 + int.from_bytes(data[at + 1 : at + 9], "little")
+    return at
+
+
+def with_huge_chunk_length(data: bytes) -> bytes:
+    """``data`` with its first chunk claiming 2**62 bytes of records."""
+    content = record_at(data, 0x06) + 9 + 3 * 8 + 4  # times, uncompressed size and CRC
+    field = content + 4 + int.from_bytes(data[content : content + 4], "little")
+    return data[:field] + (2**62).to_bytes(8, "little") + data[field + 8 :]
+
+
+def with_long_index_map(data: bytes) -> bytes:
+    """``data`` with its first chunk index's map of message index offsets claiming 1 MiB
+    (a u32 byte length after four u64 fields), past the end of the file."""
+    field = record_at(data, 0x08) + 9 + 4 * 8
+    return data[:field] + (2**20).to_bytes(4, "little") + data[field + 4 :]
+
+
+@pytest.mark.parametrize(
+    "case", ["missing", "empty", "text", "truncated", "huge length", "long index map"]
+)
 def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
     path = tmp_path / "bad.mcap"
     if case == "empty":
@@ -169,6 +194,10 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
     elif case == "truncated":
         data = planned[1].read_bytes()
         path.write_bytes(data[: len(data) // 2])
+    elif case == "huge length":  # was a MemoryError: the reader asked for 4 EiB at once
+        path.write_bytes(with_huge_chunk_length(planned[1].read_bytes()))
+    elif case == "long index map":  # was struct.error
+        path.write_bytes(with_long_index_map(planned[1].read_bytes()))
     for command in (
         ["logs", "summary"],
         ["logs", "plan"],
@@ -181,6 +210,14 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
         lines = result.stderr.strip().splitlines()
         assert len(lines) == 1 and "Traceback" not in result.stderr
         assert result.stdout == "", (command, result.stdout)  # no table header before it
+    if case != "missing":
+        recovered = run("logs", "recover", str(path), "--out", str(tmp_path / "r.mcap"))
+        if case in ("truncated", "long index map"):  # the messages before the damage
+            assert recovered.exit_code == 0 and "messages recovered" in recovered.output
+            assert read_log(tmp_path / "r.mcap").json("/transition")
+        else:  # nothing readable to rewrite
+            assert recovered.exit_code == 2 and "bilba: error:" in recovered.stderr
+            assert not (tmp_path / "r.mcap").exists()
 
 
 def official_schema(name: str) -> dict:

@@ -1,6 +1,8 @@
 """Reading planning logs back: every message decoded, with one clear error for a bad file."""
 
+import io
 import json
+import struct
 from collections import defaultdict
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -102,13 +104,12 @@ def _open(path: Path) -> bytes:
 def read_log(path: PathArg) -> Log:
     """Every message of a complete log, CRCs checked."""
     path = Path(path)
-    _open(path)
+    data = io.BytesIO(_open(path))  # a corrupt length then reads to the end, not 2**62 bytes
     log = Log(path)
     try:
-        with path.open("rb") as f:
-            for _, channel, message in make_reader(f, validate_crcs=True).iter_messages():
-                log.records.append((channel.topic, message.log_time, message.data))
-    except (McapError, ValueError, EOFError, KeyError, OSError) as exc:
+        for _, channel, message in make_reader(data, validate_crcs=True).iter_messages():
+            log.records.append((channel.topic, message.log_time, message.data))
+    except (McapError, ValueError, EOFError, KeyError, OSError, struct.error) as exc:
         raise BilbaError(
             f"{path}: truncated or corrupt MCAP ({type(exc).__name__}); "
             "`bilba logs recover` rewrites what is readable"
@@ -120,9 +121,8 @@ def read_log(path: PathArg) -> Log:
 
 def recover(path: Path, out: Path) -> int:
     """Rewrite every complete record of a (possibly truncated) log into a valid file at
-    ``out``; return the number of messages kept."""
-    import io
-
+    ``out``; return the number of messages kept. Nothing readable (a log damaged in its
+    first chunk) is one BilbaError line, and nothing is written."""
     from mcap.records import Channel, Message, Schema
 
     data = _open(path)
@@ -139,6 +139,8 @@ def recover(path: Path, out: Path) -> int:
                 messages.append(record)
     except Exception:
         pass
+    if not any(m.channel_id in channels for m in messages):
+        raise BilbaError(f"{path}: no complete message before the damage; nothing to recover")
     with out.open("wb") as f:
         writer = Writer(f, compression=CompressionType.NONE)  # chunked: indexed readers see all
         writer.start(profile="bilba", library="bilba_dist recover")
