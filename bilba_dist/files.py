@@ -29,3 +29,10 @@ def read_bytes(
     except OSError as exc:
         raise error(f"{path}: cannot read {what}: {exc.strerror or exc}") from None
     return data
+
+
+def clip_name(name: object, keep: int = 60) -> str:
+    """A path for a one-line message: as it is, or its first ``keep`` characters and its
+    length when it is long (a name too long for the file system, a path of thousands)."""
+    text = str(name)
+    return text if len(text) <= keep + 20 else f"{text[:keep]}… ({len(text)} characters)"

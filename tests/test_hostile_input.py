@@ -439,3 +439,34 @@ def test_a_pipe_or_device_given_as_a_file_is_refused_before_it_is_read(
     if os.path.exists("/dev/zero"):
         result = run_cli(*command.format("/dev/zero").split())
         assert result.exit_code == 2 and "/dev/zero: not a regular file" in result.stderr
+
+
+LONG = "n" * 300  # over any file system's 255-byte name limit
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        f"plan {LONG} --workers 0 --no-log",
+        f"plan ./{LONG}.yaml --workers 0 --no-log",
+        f"graph {'a/' * 3000}task.yaml",
+        f"validate {LONG}.json --workers 0",
+        f"export {LONG}.json --target franky",
+        f"logs summary {LONG}.mcap",
+        f"batch {LONG}.yaml --out batch",
+        f"report {LONG}",
+        f"plan peg-in-hole --workers 0 --no-log --out {LONG}.json --timeout 0",
+        f"graph peg-in-hole --dot {LONG}.dot",
+        f"validate {{plan}} --workers 0 --map grasp.x=1cm --map-out {LONG}",
+        f"logs plot {{log}} --out {LONG}.png",
+    ],
+)
+def test_a_file_name_too_long_is_one_line(command, plan_and_log, tmp_path, monkeypatch):
+    """Python 3.11's Path.exists() raises on such a name rather than answer False; an
+    output's name is checked before the work whose result it would hold."""
+    monkeypatch.chdir(tmp_path)
+    command = command.format(plan=plan_and_log / "p.json", log=plan_and_log / "l.mcap")
+    start = time.perf_counter()
+    result = run_cli(*command.split())
+    assert_one_line_exit_2(result, "", time.perf_counter() - start)
+    assert "internal error" not in result.stderr and not list(tmp_path.iterdir())

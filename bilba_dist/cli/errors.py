@@ -1,6 +1,7 @@
 """How every `bilba` sub-command fails: bad input as one line and exit code 2, a bug of ours
 as one line and exit code 3 (the traceback with BILBA_DEBUG=1)."""
 
+import errno
 import os
 import sys
 from collections.abc import Callable
@@ -10,6 +11,7 @@ from typing import Any, TypeVar
 import click
 
 from bilba_dist.errors import BilbaError
+from bilba_dist.files import clip_name
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -36,6 +38,10 @@ def user_errors(command: F) -> F:
             click.echo(f"bilba: error: {exc}", err=True)
             sys.exit(EXIT_BAD_INPUT)
         except (Exception, RecursionError) as exc:
+            if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:
+                # a name the user gave, at any path check (Python 3.11's Path.exists raises)
+                click.echo(f"bilba: error: {clip_name(exc.filename)}: file name too long", err=True)
+                sys.exit(EXIT_BAD_INPUT)
             if os.environ.get("BILBA_DEBUG"):
                 raise
             message = str(exc).splitlines()[0] if str(exc) else ""

@@ -3,10 +3,12 @@ the plan, the log) nor another of its outputs: that is refused in one line befor
 An output's folder is made, as `bilba plan --out` makes its own, and a path that cannot be
 written is one line, not a traceback."""
 
+import errno
 import os
 from pathlib import Path
 
 from bilba_dist.errors import BilbaError
+from bilba_dist.files import clip_name
 
 
 def same_file(a: Path, b: Path) -> bool:
@@ -27,6 +29,7 @@ def refuse_overwriting(outputs: dict[str, Path | None], inputs: dict[str, Path])
     or another output."""
     named = [(option, path) for option, path in outputs.items() if path is not None]
     for i, (option, path) in enumerate(named):
+        _check_name(path, option)
         for what, source in inputs.items():
             if same_file(path, source):
                 raise BilbaError(f"{option} {path} is {what}: writing it would destroy it")
@@ -35,9 +38,21 @@ def refuse_overwriting(outputs: dict[str, Path | None], inputs: dict[str, Path])
                 raise BilbaError(f"{other} and {option} name one file, {path}: give each its own")
 
 
+def _check_name(path: Path, option: str = "") -> None:
+    """One line, before the work, for a path the file system cannot hold (a name over its
+    limit, 255 bytes on most): otherwise the work's result is lost when it is written."""
+    try:
+        os.stat(path)
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            where = f"{option} " if option else ""
+            raise BilbaError(f"{where}{clip_name(path)}: file name too long") from None
+
+
 def make_folder(path: Path) -> None:
     """Make the folder ``path`` goes in; one line when that cannot be done or the folder
     cannot be written into (said before the work whose result goes there)."""
+    _check_name(path)
     if path.parent.exists() and not path.parent.is_dir():
         raise BilbaError(f"{path}: {path.parent} is a file, not a folder")
     try:
