@@ -1,6 +1,7 @@
 """Shared fixtures: the built-in tasks, and helpers to write task files."""
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
@@ -53,14 +54,9 @@ def prism_file(
     return write_task(tmp_path, yaml.safe_dump(data))
 
 
-def prism_task(
-    tmp_path: Path,
-    sides: int,
-    clearance_m: float,
-    planner: dict | None = None,
-    uncertainty: dict[str, str] | None = None,
-) -> Task:
-    return load_task(str(prism_file(tmp_path, sides, clearance_m, planner, uncertainty)))
+def prism_task(tmp_path: Path, *args: Any, **kwargs: Any) -> Task:
+    """`prism_file`'s task, loaded."""
+    return load_task(str(prism_file(tmp_path, *args, **kwargs)))
 
 
 @pytest.fixture(scope="session")
