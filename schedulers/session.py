@@ -33,8 +33,23 @@ def ray_session(workers: int, address: str | None) -> Iterator[None]:
         raise BilbaError(f"cannot start or reach {where}: {first}") from None
     try:
         yield
+    except (ray.exceptions.LocalRayletDiedError, ray.exceptions.RayActorError) as exc:
+        if getattr(exc, "actor_init_failed", False):  # an actor's constructor raised: ours
+            raise
+        raise BilbaError(ray_lost(exc)) from None
     finally:
         ray.shutdown()
+
+
+def ray_lost(exc: Exception) -> str:
+    """The line for Ray gone under a command: its local raylet died (`ray stop`, the OOM
+    killer), or an actor's node did and Ray could not restart it (the pool's actors restart
+    without limit, so an actor that stays dead means Ray itself is gone)."""
+    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return (
+        f"Ray died under this command ({type(exc).__name__}: {first}); what was written "
+        "so far is kept: run it again"
+    )
 
 
 def check_reachable(address: str, timeout_s: float = 3.0) -> None:

@@ -6,6 +6,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import jsonschema
@@ -22,6 +23,8 @@ from bilba_dist.cli.main import cli, register
 from bilba_dist.record.foxglove import PRIMITIVES
 from bilba_dist.record.reader import MAGIC, read_log
 from bilba_dist.robot.panda import PandaModel
+
+BIN = Path(sys.executable).parent
 
 
 def run(*args: str):
@@ -157,6 +160,28 @@ def test_killed_planner_loses_at_most_the_transition_in_progress(tmp_path):
     assert len(transitions) >= reported
     assert [t["index"] for t in transitions] == list(range(len(transitions)))
     assert indexed_messages(fixed)["/transition"] == len(transitions)
+
+
+def test_ctrl_c_on_bilba_plan_is_one_line_and_leaves_a_readable_log(tmp_path):
+    """Exit 130 as for a batch; the log is ended with every transition so far, so every
+    reader takes it as it is (no `logs recover`), its outcome "unfinished"."""
+    log = tmp_path / "l.mcap"
+    planner = subprocess.Popen(
+        [BIN / "bilba", "plan", "puzzle", "--workers", "0", "--log", log,
+         "--out", tmp_path / "p.json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.time() + 120
+    while not log.exists() or log.stat().st_size < 200_000:  # a transition or two in
+        assert time.time() < deadline and planner.poll() is None, "no transition in 120 s"
+        time.sleep(0.2)
+    planner.send_signal(signal.SIGINT)
+    _, err = planner.communicate(timeout=60)
+    assert planner.returncode == 130 and "Traceback" not in err
+    assert err.strip().splitlines()[-1] == f"interrupted; no plan; the log so far: {log}"
+    assert read_log(log).json("/transition") and not (tmp_path / "p.json").exists()
+    summary = run("logs", "summary", str(log))
+    assert summary.exit_code == 0 and "unfinished" in summary.output
 
 
 def record_at(data: bytes, opcode: int) -> int:

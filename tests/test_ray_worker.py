@@ -181,3 +181,37 @@ def test_unreachable_cluster_is_one_line_and_exit_2(address, message, tmp_path):
     )
     assert result.exit_code == 2
     assert message in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_ray_dying_under_a_plan_is_one_line_and_keeps_the_log(tmp_path):
+    """The local raylet killed mid-plan (`ray stop`, the OOM killer): the actors cannot
+    restart, which is Ray gone, not a bug of ours; the log written so far stays readable."""
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    import psutil
+
+    from bilba_dist.record.reader import read_log
+
+    log = tmp_path / "l.mcap"
+    bilba = Path(sys.executable).parent / "bilba"
+    planner = subprocess.Popen(
+        [bilba, "plan", "puzzle", "--workers", "1", "--log", log, "--out", tmp_path / "p.json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline, raylets = time.time() + 120, []
+    while not raylets or log.stat().st_size < 200_000:  # Ray up, a transition or two in
+        assert time.time() < deadline and planner.poll() is None, "no transition in 120 s"
+        time.sleep(0.2)
+        raylets = [p for p in psutil.Process(planner.pid).children(True) if p.name() == "raylet"]
+    (raylet,) = raylets
+    raylet.kill()
+    _, err = planner.communicate(timeout=120)
+    assert planner.returncode == 2 and "Traceback" not in err, err[-2000:]
+    (line,) = (x for x in err.splitlines() if x.startswith("bilba:"))
+    assert line.startswith("bilba: error: Ray died under this command")
+    assert read_log(log).json("/transition") and not (tmp_path / "p.json").exists()

@@ -5,11 +5,8 @@ from pathlib import Path
 
 import click
 
-from bilba_dist.cli.errors import user_errors
+from bilba_dist.cli.errors import EXIT_INTERRUPTED, user_errors
 from bilba_dist.errors import BilbaError
-
-#: Exit code when the driver was interrupted (jobs recorded so far are kept).
-EXIT_INTERRUPTED = 130
 
 
 @click.command("batch")

@@ -19,6 +19,9 @@ F = TypeVar("F", bound=Callable[..., Any])
 EXIT_BAD_INPUT = 2
 
 
+#: Exit code on Ctrl-C (what was finished is kept: a batch's records, a plan's log so far).
+EXIT_INTERRUPTED = 130
+
 #: Exit code for a failure of bilba itself (a bug): one line, the traceback with BILBA_DEBUG=1.
 EXIT_INTERNAL = 3
 

@@ -2,13 +2,15 @@
 
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import click
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.belief.start import check_start_free
-from bilba_dist.cli.errors import user_errors
+from bilba_dist.cli.errors import EXIT_INTERRUPTED, user_errors
 from bilba_dist.cli.options import (
     SEED,
     TIMEOUT_S,
@@ -150,6 +152,7 @@ def plan_command(
         return
     log = None if no_log else LogWriter(log_path, loaded, planner, seed, model == "panda")
     with (
+        closing_log(log),
         rollout_backend(loaded, workers, address, model) as backend,
         tqdm(unit=" rollouts", file=sys.stderr, dynamic_ncols=True) as bar,
     ):
@@ -179,6 +182,24 @@ def plan_command(
         click.echo(f"log        {log.path} ({log.transitions} transitions)")
     if not result.success:
         sys.exit(EXIT_NO_PLAN)
+
+
+@contextmanager
+def closing_log(log: LogWriter | None) -> Iterator[None]:
+    """Inside, a search that ends by an exception (Ctrl-C, Ray gone) leaves its log ended
+    and readable with every transition so far, not a file for `bilba logs recover`; Ctrl-C
+    is one line and exit code 130, as for `bilba batch`."""
+    try:
+        yield
+    except BaseException as exc:
+        if log is not None:
+            log.close()
+        if not isinstance(exc, KeyboardInterrupt):
+            raise
+        click.echo(
+            "interrupted; no plan" + (f"; the log so far: {log.path}" if log else ""), err=True
+        )
+        sys.exit(EXIT_INTERRUPTED)
 
 
 def plan_portfolio(

@@ -194,5 +194,11 @@ class LogWriter:
         """The plan (the plan file's exact text) and the outcome, then the summary section."""
         self.write("/plan", plan_text)
         self.write("/outcome", outcome)
-        self._writer.finish()
-        self._file.close()
+        self.close()
+
+    def close(self) -> None:
+        """End the file with what it holds, readable as it is (a search cut short by Ctrl-C
+        or by Ray dying has no plan or outcome); a second call does nothing."""
+        if not self._file.closed:
+            self._writer.finish()
+            self._file.close()
