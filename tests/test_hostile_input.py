@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from bilba_dist.errors import BilbaError
 from bilba_dist.task.loader import builtin_tasks
 from tests.test_task_files import run_cli
 
@@ -470,3 +471,30 @@ def test_a_file_name_too_long_is_one_line(command, plan_and_log, tmp_path, monke
     result = run_cli(*command.split())
     assert_one_line_exit_2(result, "", time.perf_counter() - start)
     assert "internal error" not in result.stderr and not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize(
+    ("raised", "code", "line"),
+    [
+        (KeyboardInterrupt(), 130, "interrupted"),
+        (BilbaError("a bad value"), 2, "bilba: error: a bad value"),
+        (OSError(36, "File name too long", "n" * 300), 2, "bilba: error: nnnn"),
+        (ZeroDivisionError("boom"), 3, "bilba: internal error: ZeroDivisionError: boom"),
+    ],
+)
+def test_every_command_fails_in_one_line_with_its_exit_code(raised, code, line):
+    """What `user_errors` makes of what a command raises (Ctrl-C: `validate`, `export`,
+    `logs`, and a `--portfolio` plan; `batch` and `plan` say first what they kept)."""
+    import click
+    from click.testing import CliRunner
+
+    from bilba_dist.cli.errors import user_errors
+
+    @click.command()
+    @user_errors
+    def command() -> None:
+        raise raised
+
+    result = CliRunner().invoke(command, [])
+    assert result.exit_code == code and result.stderr.count("\n") == 1, result.stderr
+    assert result.stderr.startswith(line) and "Traceback" not in result.output

@@ -1,5 +1,6 @@
 """How every `bilba` sub-command fails: bad input as one line and exit code 2, a bug of ours
-as one line and exit code 3 (the traceback with BILBA_DEBUG=1)."""
+as one line and exit code 3 (the traceback with BILBA_DEBUG=1), Ctrl-C as one line and exit
+code 130."""
 
 import errno
 import os
@@ -40,6 +41,9 @@ def user_errors(command: F) -> F:
         except BilbaError as exc:
             click.echo(f"bilba: error: {exc}", err=True)
             sys.exit(EXIT_BAD_INPUT)
+        except KeyboardInterrupt:  # `batch` and `plan` say first what they kept
+            click.echo("interrupted", err=True)
+            sys.exit(EXIT_INTERRUPTED)
         except (Exception, RecursionError) as exc:
             if isinstance(exc, OSError) and exc.errno == errno.ENAMETOOLONG:
                 # a name the user gave, at any path check (Python 3.11's Path.exists raises)
