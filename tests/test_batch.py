@@ -37,6 +37,18 @@ def wait_for_records(out: Path, n: int, timeout_s: float = 180) -> None:
         time.sleep(0.2)
 
 
+def batch_with_one_record(out: Path) -> subprocess.Popen:
+    """`bilba batch` of the slow smoke grid on one CPU, running, its first job recorded."""
+    driver = subprocess.Popen(
+        [BIN / "bilba", "batch", SLOW_SMOKE, "--out", out, "--workers", "1"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    wait_for_records(out, 1)
+    return driver
+
+
 def motions(folder: Path, record: dict) -> list:
     return json.loads((folder / record["plan"]).read_text())["motions"]
 
@@ -163,13 +175,7 @@ def smoke_batch(tmp_path_factory):
     """The smoke grid, its driver interrupted (SIGINT) after the first record, a torn record
     line appended as a killed driver would leave it, then finished with --resume."""
     out = tmp_path_factory.mktemp("batch") / "hex-smoke"
-    driver = subprocess.Popen(
-        [BIN / "bilba", "batch", SLOW_SMOKE, "--out", out, "--workers", "1"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    wait_for_records(out, 1)
+    driver = batch_with_one_record(out)
     driver.send_signal(signal.SIGINT)
     _, err = driver.communicate(timeout=60)
     before = read_records(out)
@@ -345,13 +351,7 @@ def test_a_batch_whose_ray_dies_stops_in_one_line_and_records_no_job_it_did_not_
     import psutil
 
     out = tmp_path / "out"
-    driver = subprocess.Popen(
-        [BIN / "bilba", "batch", SLOW_SMOKE, "--out", out, "--workers", "1"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    wait_for_records(out, 1)
+    driver = batch_with_one_record(out)
     (raylet,) = (p for p in psutil.Process(driver.pid).children(True) if p.name() == "raylet")
     raylet.kill()
     _, err = driver.communicate(timeout=120)
