@@ -22,3 +22,10 @@ class NoScheduleError(BilbaError):
 
 class UnreachableError(BilbaError):
     """A gripper setpoint has no inverse-kinematics solution within the joint limits."""
+
+
+def first_line(exc: BaseException, default: str = "") -> str:
+    """The first non-blank line of ``exc``'s text (``default`` when it has none): what a
+    one-line error quotes of an exception from a library."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else default

@@ -25,7 +25,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from bilba_dist.errors import BilbaError
+from bilba_dist.errors import BilbaError, first_line
 from bilba_dist.schedulers.jobs import Batch, Job
 from bilba_dist.task.loader import build_task
 from bilba_dist.task.schema import TaskSpec
@@ -262,7 +262,7 @@ def error_result(exc: Exception) -> dict[str, Any]:
 
 
 def _error_line(exc: BaseException) -> dict[str, Any]:
-    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    first = first_line(exc)
     return {"status": "error", "reason": f"{type(exc).__name__}: {first}"}
 
 

@@ -6,7 +6,7 @@ import socket
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-from bilba_dist.errors import BilbaError
+from bilba_dist.errors import BilbaError, first_line
 from bilba_dist.rollout import DynamicsModel, RolloutBackend
 from bilba_dist.task.loader import Task
 
@@ -29,7 +29,7 @@ def ray_session(workers: int, address: str | None) -> Iterator[None]:
         )
     except (ConnectionError, RuntimeError, ValueError) as exc:
         where = f"the Ray cluster at {address}" if address else "a local Ray instance"
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        first = first_line(exc, type(exc).__name__)
         raise BilbaError(f"cannot start or reach {where}: {first}") from None
     try:
         yield
@@ -45,7 +45,7 @@ def ray_lost(exc: Exception) -> str:
     """The line for Ray gone under a command: its local raylet died (`ray stop`, the OOM
     killer), or an actor's node did and Ray could not restart it (the pool's actors restart
     without limit, so an actor that stays dead means Ray itself is gone)."""
-    first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    first = first_line(exc)
     return (
         f"Ray died under this command ({type(exc).__name__}: {first}); what was written "
         "so far is kept: run it again"

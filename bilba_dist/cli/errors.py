@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 
 import click
 
-from bilba_dist.errors import BilbaError
+from bilba_dist.errors import BilbaError, first_line
 from bilba_dist.files import clip_name
 
 F = TypeVar("F", bound=Callable[..., Any])
@@ -51,7 +51,7 @@ def user_errors(command: F) -> F:
                 sys.exit(EXIT_BAD_INPUT)
             if os.environ.get("BILBA_DEBUG"):
                 raise
-            message = str(exc).splitlines()[0] if str(exc) else ""
+            message = first_line(exc)
             click.echo(
                 f"bilba: internal error: {type(exc).__name__}: {message} (a bug: please report "
                 "it; BILBA_DEBUG=1 shows the traceback)",

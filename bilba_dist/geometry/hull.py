@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from bilba_dist.errors import GeometryError
+from bilba_dist.errors import GeometryError, first_line
 
 #: Two unit normals closer than this (1 - cos angle) belong to one face.
 NORMAL_TOL = 1e-9
@@ -35,7 +35,7 @@ def convex_hull(points: np.ndarray, what: str) -> ConvexHull:
     try:
         hull = ConvexHull(points)
     except QhullError as exc:
-        reason = str(exc).strip().splitlines()[0] if str(exc).strip() else "qhull failed"
+        reason = first_line(exc, "qhull failed")
         raise GeometryError(f"{what}: degenerate (flat or repeated points): {reason}") from None
     scale = float(np.ptp(points, axis=0).max())
     if hull.volume <= 1e-12 * scale**3:

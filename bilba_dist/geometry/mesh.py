@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bilba_dist.errors import GeometryError
+from bilba_dist.errors import GeometryError, first_line
 from bilba_dist.task.units import WORKSPACE_M
 
 #: A mesh is convex when its volume is within this fraction of its convex hull's.
@@ -34,7 +34,7 @@ def mesh_vertices(path: Path, scale: float) -> np.ndarray:
     try:
         mesh = trimesh.load_mesh(path, process=True)
     except Exception as exc:  # trimesh raises many kinds for a corrupt file
-        reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+        reason = first_line(exc, type(exc).__name__)
         raise GeometryError(f"mesh {path}: cannot load it: {reason}") from None
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise GeometryError(f"mesh {path}: holds no triangles (one closed surface expected)")
