@@ -1,6 +1,7 @@
 """MCAP logs of real plans: readable with CRCs, schema-valid, the same plan, crash-safe."""
 
 import hashlib
+import io
 import json
 import os
 import signal
@@ -16,7 +17,8 @@ import pytest
 from click.testing import CliRunner
 from mcap.data_stream import ReadDataStream
 from mcap.reader import NonSeekingReader, SeekingReader, make_reader
-from mcap.records import MessageIndex
+from mcap.records import Chunk, Message, MessageIndex
+from mcap.stream_reader import breakup_chunk
 
 import bilba_dist.record
 from bilba_dist.cli.main import cli, register
@@ -207,6 +209,54 @@ def with_long_index_map(data: bytes) -> bytes:
     return data[:field] + (2**20).to_bytes(4, "little") + data[field + 4 :]
 
 
+def chunk_starts(data: bytes) -> list[int]:
+    """Where each chunk of the data section starts."""
+    at, starts = len(MAGIC), []
+    while data[at] != 0x0F:  # DataEnd: the summary follows
+        if data[at] == 0x06:
+            starts.append(at)
+        at += 9 + int.from_bytes(data[at + 1 : at + 9], "little")
+    return starts
+
+
+@pytest.mark.parametrize("damage", ["a byte of its messages", "its length", "its start"])
+def test_recover_keeps_what_follows_a_damaged_chunk(damage, planned, tmp_path):
+    """The writer ends a chunk at each transition: damaging one chunk loses its own messages,
+    not the later ones — reading goes on after it (by its length, or, where the length is
+    what broke, at the next chunk that reads with its checksum)."""
+    data = planned[1].read_bytes()
+    starts = chunk_starts(data)
+    middle = starts[len(starts) // 2]
+    end = middle + 9 + int.from_bytes(data[middle + 1 : middle + 9], "little")
+    chunk = Chunk.read(ReadDataStream(io.BytesIO(data[middle + 9 : end])))
+    in_chunk = [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
+    bad = bytearray(data)
+    if damage == "a byte of its messages":
+        bad[end - 10] ^= 0xFF
+    elif damage == "its length":
+        bad[middle + 5] ^= 0x40  # 2**38 more: past the end of the file
+    else:
+        bad = bad[:middle] + bad[middle + 20 :]  # its first 20 bytes gone: lengths shifted
+    (tmp_path / "bad.mcap").write_bytes(bytes(bad))
+    result = run("logs", "recover", str(tmp_path / "bad.mcap"), "--out", str(tmp_path / "r.mcap"))
+    assert result.exit_code == 0, result.output
+    original, kept = read_log(planned[1]).records, read_log(tmp_path / "r.mcap").records
+    lost = {(m.log_time, m.data) for m in in_chunk}
+    assert in_chunk and kept == [r for r in original if (r[1], r[2]) not in lost]
+    assert kept[-1] == original[-1] and len(starts) > 8  # later chunks were kept
+
+
+def test_recover_refuses_a_log_whose_header_is_damaged(planned, tmp_path):
+    """The first chunk holds the topics and /metadata: without it there is no log to write."""
+    bad = bytearray(planned[1].read_bytes())
+    first = chunk_starts(bytes(bad))[0]
+    bad[first + 9 + 300] ^= 0xFF
+    (tmp_path / "bad.mcap").write_bytes(bytes(bad))
+    result = run("logs", "recover", str(tmp_path / "bad.mcap"), "--out", str(tmp_path / "r.mcap"))
+    assert result.exit_code == 2 and "header is damaged" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not (tmp_path / "r.mcap").exists()
+
+
 @pytest.mark.parametrize(
     "case", ["missing", "empty", "text", "truncated", "huge length", "long index map"]
 )
@@ -237,7 +287,7 @@ def test_bad_log_files_are_one_line_and_exit_2(case, planned, tmp_path):
         assert result.stdout == "", (command, result.stdout)  # no table header before it
     if case != "missing":
         recovered = run("logs", "recover", str(path), "--out", str(tmp_path / "r.mcap"))
-        if case in ("truncated", "long index map"):  # the messages before the damage
+        if case in ("truncated", "huge length", "long index map"):  # the messages intact
             assert recovered.exit_code == 0 and "messages recovered" in recovered.output
             assert read_log(tmp_path / "r.mcap").json("/transition")
         else:  # nothing readable to rewrite

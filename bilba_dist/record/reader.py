@@ -4,7 +4,7 @@ import io
 import json
 import struct
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -13,9 +13,12 @@ from typing import Any
 
 from jsonschema import Draft202012Validator
 from jsonschema.exceptions import best_match
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Chunk, Message, Schema
+from mcap.stream_reader import breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from bilba_dist.errors import BilbaError
@@ -23,6 +26,13 @@ from bilba_dist.files import PathArg, read_bytes
 from bilba_dist.record.schemas import TOPICS
 
 MAGIC = b"\x89MCAP0\r\n"
+#: Top-level records that hold no schema, channel or message (indexes, statistics...).
+_OTHER_RECORDS = {o.value for o in Opcode} - {
+    Opcode.CHUNK,
+    Opcode.SCHEMA,
+    Opcode.CHANNEL,
+    Opcode.MESSAGE,
+}
 
 
 @dataclass
@@ -119,28 +129,90 @@ def read_log(path: PathArg) -> Log:
     return log
 
 
-def recover(path: Path, out: Path) -> int:
-    """Rewrite every complete record of a (possibly truncated) log into a valid file at
-    ``out``; return the number of messages kept. Nothing readable (a log damaged in its
-    first chunk) is one BilbaError line, and nothing is written."""
-    from mcap.records import Channel, Message, Schema
+def _u64(data: bytes, at: int) -> int:
+    return int.from_bytes(data[at : at + 8], "little")
 
+
+def _parsed(opcode: int, body: bytes, strict: bool = False) -> list[Any] | None:
+    """The schemas, channels and messages in one top-level record's content ``body`` ([] for
+    a record of another kind), or None when it does not parse to exactly its length, or a
+    chunk's checksum does not match (``strict``: a chunk must carry one — for a chunk found
+    by scanning, not by the length of the record before it)."""
+    readers: dict[int, Callable[[ReadDataStream], Any]] = {
+        Opcode.CHUNK: Chunk.read,
+        Opcode.SCHEMA: Schema.read,
+        Opcode.CHANNEL: Channel.read,
+        Opcode.MESSAGE: lambda stream: Message.read(stream, len(body)),
+    }
+    if opcode not in readers:
+        return [] if opcode in _OTHER_RECORDS else None
+    stream = ReadDataStream(io.BytesIO(body))
+    try:
+        record = readers[opcode](stream)
+        if stream.count != len(body):
+            return None
+        if isinstance(record, Chunk):
+            if strict and not record.uncompressed_crc:
+                return None
+            return breakup_chunk(record, validate_crc=True)
+        return [record]
+    except Exception:  # whatever the damage, the record is not readable
+        return None
+
+
+def _next_chunk(data: bytes, start: int) -> tuple[int, list[Any]] | None:
+    """The end and the records of the first chunk from ``start`` on whose lengths agree with
+    each other and whose checksum matches: where reading resumes after damage."""
+    at = data.find(Opcode.CHUNK.to_bytes(1, "little"), start)
+    while at != -1 and at + 9 + 40 <= len(data):
+        end = at + 9 + _u64(data, at + 1)
+        name = int.from_bytes(data[at + 37 : at + 41], "little")  # the compression's name
+        if end <= len(data) and at + 49 + name + _u64(data, at + 41 + name) == end:
+            records = _parsed(Opcode.CHUNK, data[at + 9 : end], strict=True)
+            if records is not None:
+                return end, records
+        at = data.find(Opcode.CHUNK.to_bytes(1, "little"), at + 1)
+    return None
+
+
+def _readable_records(data: bytes) -> Iterator[Any]:
+    """The schemas, channels and messages of every readable record of an MCAP file, in
+    order (the summary's schemas and channels too: a finished file repeats them there).
+    After a record that does not read (a bad checksum or length, a file cut short inside
+    it), reading resumes at the next chunk that reads with a matching checksum."""
+    at = len(MAGIC)
+    while at + 9 <= len(data) and data[at] != Opcode.FOOTER:
+        end = at + 9 + _u64(data, at + 1)
+        records = _parsed(data[at], data[at + 9 : end]) if end <= len(data) else None
+        if records is None:
+            found = _next_chunk(data, at + 1)
+            if found is None:
+                return
+            end, records = found
+        yield from records
+        at = end
+
+
+def recover(path: Path, out: Path) -> int:
+    """Rewrite every readable message of a damaged or truncated log into a valid file at
+    ``out`` (`_readable_records`: a damaged chunk loses its own messages, not the later
+    ones); return the number of messages kept. A log whose header (the first chunk: the
+    topics and /metadata) is damaged has nothing usable: one BilbaError line, nothing
+    written."""
     data = _open(path)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
     messages: list[Message] = []
-    try:
-        for record in StreamReader(io.BytesIO(data), skip_magic=False, validate_crcs=True).records:
-            if isinstance(record, Schema):
-                schemas[record.id] = record
-            elif isinstance(record, Channel):
-                channels[record.id] = record
-            elif isinstance(record, Message):
-                messages.append(record)
-    except Exception:
-        pass
-    if not any(m.channel_id in channels for m in messages):
-        raise BilbaError(f"{path}: no complete message before the damage; nothing to recover")
+    for record in _readable_records(data):
+        if isinstance(record, Schema):
+            schemas[record.id] = record
+        elif isinstance(record, Channel):
+            channels[record.id] = record
+        elif isinstance(record, Message):
+            messages.append(record)
+    topics = {c.id: c.topic for c in channels.values() if c.schema_id in schemas}
+    if not any(topics.get(m.channel_id) == "/metadata" for m in messages):
+        raise BilbaError(f"{path}: the log's header is damaged; nothing to recover")
     with out.open("wb") as f:
         writer = Writer(f, compression=CompressionType.NONE)  # chunked: indexed readers see all
         writer.start(profile="bilba", library="bilba_dist recover")
@@ -152,7 +224,7 @@ def recover(path: Path, out: Path) -> int:
                 c.topic, c.message_encoding, schema_ids[c.schema_id], dict(c.metadata)
             )
             for cid, c in channels.items()
-            if c.schema_id in schema_ids
+            if cid in topics
         }
         kept = 0
         for m in messages:
