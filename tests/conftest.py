@@ -1,5 +1,8 @@
 """Shared fixtures: the built-in tasks, and helpers to write task files."""
 
+import subprocess
+import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -68,3 +71,31 @@ def default_plan_file(tmp_path_factory) -> Path:
     result = run_cli("plan", "peg-in-hole", "--workers", "0", "--no-log", "--out", str(out))
     assert result.exit_code == 0, result.output
     return out
+
+
+def raylets_of(pid: int) -> list:
+    """The raylet processes a command started (its local Ray instance), via psutil."""
+    import psutil
+
+    return [p for p in psutil.Process(pid).children(recursive=True) if p.name() == "raylet"]
+
+
+def planner_in_progress(tmp_path: Path, workers: int) -> tuple[subprocess.Popen, Path]:
+    """`bilba plan puzzle` in a subprocess, once its log holds a transition or two (and, on
+    Ray, its raylet is up): a planner to interrupt. Its plan would go to tmp_path/p.json."""
+    log = tmp_path / "l.mcap"
+    bilba = Path(sys.executable).parent / "bilba"
+    planner = subprocess.Popen(
+        [bilba, "plan", "puzzle", "--workers", str(workers), "--log", log,
+         "--out", tmp_path / "p.json"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.time() + 120
+    while (
+        not log.exists()
+        or log.stat().st_size < 200_000
+        or (workers and not raylets_of(planner.pid))
+    ):
+        assert time.time() < deadline and planner.poll() is None, "no transition in 120 s"
+        time.sleep(0.2)
+    return planner, log

@@ -17,6 +17,7 @@ from click.testing import CliRunner
 from bilba_dist.cli.main import cli, register
 from bilba_dist.schedulers.batch import RECORDS, read_records, run_batch
 from bilba_dist.schedulers.jobs import load_jobs
+from tests.conftest import raylets_of
 
 ROOT = Path(__file__).resolve().parents[1]
 SMOKE = ROOT / "deploy" / "jobs" / "smoke.yaml"  # 4 jobs: peg pitch, 2 planners × 2 seeds
@@ -348,11 +349,9 @@ def test_a_job_that_raised_is_recorded_with_its_own_exception_and_traceback():
 def test_a_batch_whose_ray_dies_stops_in_one_line_and_records_no_job_it_did_not_run(tmp_path):
     """`ray stop` or the OOM killer takes the local raylet: the jobs left are not errors of
     theirs, so none is recorded and --resume runs them."""
-    import psutil
-
     out = tmp_path / "out"
     driver = batch_with_one_record(out)
-    (raylet,) = (p for p in psutil.Process(driver.pid).children(True) if p.name() == "raylet")
+    (raylet,) = raylets_of(driver.pid)
     raylet.kill()
     _, err = driver.communicate(timeout=120)
     records = read_records(out)

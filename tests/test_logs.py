@@ -7,7 +7,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import jsonschema
@@ -25,6 +24,7 @@ from bilba_dist.cli.main import cli, register
 from bilba_dist.record.foxglove import PRIMITIVES
 from bilba_dist.record.reader import MAGIC, read_log
 from bilba_dist.robot.panda import PandaModel
+from tests.conftest import planner_in_progress
 
 BIN = Path(sys.executable).parent
 
@@ -167,16 +167,7 @@ def test_killed_planner_loses_at_most_the_transition_in_progress(tmp_path):
 def test_ctrl_c_on_bilba_plan_is_one_line_and_leaves_a_readable_log(tmp_path):
     """Exit 130 as for a batch; the log is ended with every transition so far, so every
     reader takes it as it is (no `logs recover`), its outcome "unfinished"."""
-    log = tmp_path / "l.mcap"
-    planner = subprocess.Popen(
-        [BIN / "bilba", "plan", "puzzle", "--workers", "0", "--log", log,
-         "--out", tmp_path / "p.json"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-    )  # fmt: skip
-    deadline = time.time() + 120
-    while not log.exists() or log.stat().st_size < 200_000:  # a transition or two in
-        assert time.time() < deadline and planner.poll() is None, "no transition in 120 s"
-        time.sleep(0.2)
+    planner, log = planner_in_progress(tmp_path, workers=0)
     planner.send_signal(signal.SIGINT)
     _, err = planner.communicate(timeout=60)
     assert planner.returncode == 130 and "Traceback" not in err

@@ -9,6 +9,7 @@ ray = pytest.importorskip("ray")
 
 from bilba_dist.task.loader import load_task  # noqa: E402
 from bilba_dist.workers.rollout_worker import RolloutWorker  # noqa: E402
+from tests.conftest import planner_in_progress, raylets_of  # noqa: E402
 from tests.test_physics import fixed_motion_set  # noqa: E402
 
 
@@ -186,29 +187,10 @@ def test_unreachable_cluster_is_one_line_and_exit_2(address, message, tmp_path):
 def test_ray_dying_under_a_plan_is_one_line_and_keeps_the_log(tmp_path):
     """The local raylet killed mid-plan (`ray stop`, the OOM killer): the actors cannot
     restart, which is Ray gone, not a bug of ours; the log written so far stays readable."""
-    import subprocess
-    import sys
-    import time
-    from pathlib import Path
-
-    import psutil
-
     from bilba_dist.record.reader import read_log
 
-    log = tmp_path / "l.mcap"
-    bilba = Path(sys.executable).parent / "bilba"
-    planner = subprocess.Popen(
-        [bilba, "plan", "puzzle", "--workers", "1", "--log", log, "--out", tmp_path / "p.json"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    deadline, raylets = time.time() + 120, []
-    while not raylets or log.stat().st_size < 200_000:  # Ray up, a transition or two in
-        assert time.time() < deadline and planner.poll() is None, "no transition in 120 s"
-        time.sleep(0.2)
-        raylets = [p for p in psutil.Process(planner.pid).children(True) if p.name() == "raylet"]
-    (raylet,) = raylets
+    planner, log = planner_in_progress(tmp_path, workers=1)
+    (raylet,) = raylets_of(planner.pid)
     raylet.kill()
     _, err = planner.communicate(timeout=120)
     assert planner.returncode == 2 and "Traceback" not in err, err[-2000:]
