@@ -258,3 +258,23 @@ def test_slice_membership_agrees_with_exact_collision(task_name, rpy, unit, requ
     if abs(distance) < 1e-6:
         return  # within coal's tolerance of touching: either answer is right
     assert state == (INSIDE if distance < 0 else OUTSIDE), f"coal distance {distance}"
+
+
+@pytest.mark.parametrize("task_name", ["hex-peg", "puzzle"])
+def test_pruning_facets_by_their_boxes_loses_no_vertex(task_name, monkeypatch):
+    """A triple of C-obstacles only tries the facets whose boxes meet the box all three
+    share (a ring of overlapping walls — hex-peg, or a part split into convex pieces — has
+    thousands of triples): the same vertices as trying every facet."""
+    import bilba_dist.cspace.boundary as boundary
+
+    task = load_task(task_name)
+    rotations = [p.X_OM(task.X_WG0).rotation for p in initial_belief(task)[:2]]
+    pruned = [CObsSlice.build(task.environment, task.manipuland, R).vertices for R in rotations]
+
+    def unbounded(p):
+        return np.full((len(p.b), 3), -np.inf), np.full((len(p.b), 3), np.inf)
+
+    monkeypatch.setattr(boundary, "_facet_boxes", unbounded)
+    for R, vertices in zip(rotations, pruned, strict=True):
+        every = CObsSlice.build(task.environment, task.manipuland, R).vertices
+        np.testing.assert_array_equal(vertices, every)

@@ -5,7 +5,10 @@ Three kinds, each kept only if no polytope holds it strictly inside:
 2. an edge of one polytope crossing a facet of another;
 3. a point where facets of three different polytopes meet (rare, but the floor of a channel
    between walls has only these: without them a peg's goal region has no vertex).
-Polytope pairs and triples whose bounding boxes do not overlap are skipped.
+Polytope pairs and triples whose bounding boxes do not overlap are skipped, and so are the
+facets of a triple whose own box misses the box the three share: a point on a facet and
+inside all three lies in both (a meshed part split into tens of convex pieces makes tens of
+thousands of triples, each of up to 10⁵ facet combinations).
 """
 
 from itertools import combinations, permutations
@@ -17,6 +20,9 @@ from bilba_dist.cspace.polytope import TOL, Polytope
 
 #: Planes whose normals' triple product is below this are treated as parallel.
 SINGULAR = 1e-9
+#: How far outside a facet's box a triple point may be found (rounding where three planes
+#: meet at a shallow angle) [m]: generous, since it only decides which facets are tried.
+BOX_MARGIN = 1e-6
 
 
 def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndarray:
@@ -26,11 +32,17 @@ def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndar
     for i, j in permutations(range(len(polytopes)), 2):
         if overlap[i, j]:
             candidates.append(_edge_facet(polytopes[i], polytopes[j]))
+    boxes = [_facet_boxes(p) for p in polytopes]
     for i, j, k in combinations(range(len(polytopes)), 3):
         if overlap[i, j] and overlap[j, k] and overlap[i, k]:
-            candidates.append(_facet_triples(polytopes[i], polytopes[j], polytopes[k]))
+            triple = (polytopes[i], polytopes[j], polytopes[k])
+            candidates.append(_facet_triples(triple, (boxes[i], boxes[j], boxes[k])))
     points = np.concatenate([c for c in candidates if len(c)]) if candidates else np.zeros((0, 3))
-    points = points[stack.slack(points).min(axis=1) >= -TOL]
+    outside = [
+        stack.slack(chunk).min(axis=1) >= -TOL
+        for chunk in np.array_split(points, 1 + len(points) // 4096)
+    ]
+    points = points[np.concatenate(outside)]
     return dedupe(points)
 
 
@@ -60,16 +72,37 @@ def _edge_facet(a: Polytope, b: Polytope) -> np.ndarray:
     return points[_inside_closed(b, points)]
 
 
-def _facet_triples(a: Polytope, b: Polytope, c: Polytope) -> np.ndarray:
-    """Points where one facet plane of each of ``a``, ``b``, ``c`` meet, inside all three."""
-    grid = np.meshgrid(np.arange(len(a.b)), np.arange(len(b.b)), np.arange(len(c.b)), indexing="ij")
+def _facet_boxes(p: Polytope) -> tuple[np.ndarray, np.ndarray]:
+    """The axis-aligned bounds of each facet polygon of ``p``, (F, 3) each."""
+    return (
+        np.array([polygon.min(axis=0) for polygon in p.polygons]),
+        np.array([polygon.max(axis=0) for polygon in p.polygons]),
+    )
+
+
+def _facet_triples(
+    triple: tuple[Polytope, Polytope, Polytope],
+    boxes: tuple[tuple[np.ndarray, np.ndarray], ...],
+) -> np.ndarray:
+    """Points where one facet plane of each polytope of ``triple`` meet, inside all three.
+    Only facets whose box (``boxes``: `_facet_boxes` of each) meets the box the three
+    polytopes share can hold such a point."""
+    lower = np.max([p.lower for p in triple], axis=0) - BOX_MARGIN
+    upper = np.min([p.upper for p in triple], axis=0) + BOX_MARGIN
+    facets = [
+        np.flatnonzero(np.all((low <= upper) & (lower <= high), axis=1)) for low, high in boxes
+    ]
+    if any(len(f) == 0 for f in facets):
+        return np.zeros((0, 3))
+    a, b, c = triple
+    grid = np.meshgrid(*facets, indexing="ij")
     ia, ib, ic = (g.ravel() for g in grid)
     normals = np.stack([a.A[ia], b.A[ib], c.A[ic]], axis=1)  # (T, 3, 3)
     offsets = np.stack([a.b[ia], b.b[ib], c.b[ic]], axis=1)
     det = np.linalg.det(normals)
     ok = np.abs(det) > SINGULAR
     points = np.linalg.solve(normals[ok], offsets[ok][:, :, None])[:, :, 0]
-    for p in (a, b, c):
+    for p in triple:
         points = points[_inside_closed(p, points)]
     return points
 

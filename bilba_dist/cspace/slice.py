@@ -25,6 +25,9 @@ PROBE_M = 1e-5
 #: Probe directions in each facet's plane: 12, each 15° off the plane's axes, so that on the
 #: mostly axis-aligned faces of these parts no probe runs along an edge of a region.
 PROBE_ANGLES = (np.arange(12) + 0.5) * np.pi / 6
+#: Points whose contacts are computed at once: (N, F) arrays of a part split into tens of
+#: convex pieces (thousands of facets) for a million probes would take tens of GB.
+CHUNK_POINTS = 4096
 
 
 @dataclass(frozen=True)
@@ -99,16 +102,17 @@ class CObsSlice:
         """The contact set at each point: the labels of every facet it lies on, of every
         polytope it is on the boundary of; empty for points not on the slice's boundary."""
         points = np.atleast_2d(points)
-        on_union, on_facet = self._on_facets(points)
         result: list[ContactSet] = []
-        for i in range(len(points)):
-            if not on_union[i]:
-                result.append(frozenset())
-                continue
-            labels: set[ContactPair] = set()
-            for f in np.flatnonzero(on_facet[i]):
-                labels |= self._facet_labels[f]
-            result.append(frozenset(labels))
+        for start in range(0, len(points), CHUNK_POINTS):  # (N, F) arrays: bounded memory
+            on_union, on_facet = self._on_facets(points[start : start + CHUNK_POINTS])
+            for on, facets in zip(on_union, on_facet, strict=True):
+                if not on:
+                    result.append(frozenset())
+                    continue
+                labels: set[ContactPair] = set()
+                for f in np.flatnonzero(facets):
+                    labels |= self._facet_labels[f]
+                result.append(frozenset(labels))
         return tuple(result)
 
     def in_mode(self, points: np.ndarray, mode: ContactPair) -> np.ndarray:
@@ -123,7 +127,9 @@ class CObsSlice:
         facet = self.stack.facet_slack(points)
         per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
         on_union = per_polytope.min(axis=1) >= -TOL
-        on_facet = (np.abs(facet) <= TOL) & (np.abs(per_polytope[:, self.stack.owner]) <= TOL)
+        on_surface = np.abs(per_polytope) <= TOL  # (N, P): gathered as booleans, not floats
+        on_facet = np.abs(facet) <= TOL
+        on_facet &= on_surface[:, self.stack.owner]
         return on_union, on_facet
 
     def mode_facets(self, mode: ContactPair) -> list[tuple[int, int]]:
