@@ -152,3 +152,80 @@ def test_the_mesh_task_plans_end_to_end_from_its_stl():
     assert result.success, result.reason
     final = result.final_belief
     assert final is not None and all(task.goal in c for c in final.contacts)
+
+
+def obj_file(path: Path, objects: dict[str, trimesh.Trimesh]) -> None:
+    """An OBJ file with one ``o`` object per mesh, as CoACD writes its convex parts."""
+    lines, base = [], 1
+    for name, mesh in objects.items():
+        lines.append(f"o {name}")
+        lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in mesh.vertices]
+        lines += [f"f {a + base} {b + base} {c + base}" for a, b, c in mesh.faces]
+        base += len(mesh.vertices)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def halves_mm(upper: str = "half2", lower: str = "half10") -> dict[str, trimesh.Trimesh]:
+    """The hexagonal peg cut in two at z = 0, as two objects (named so that a plain sort
+    would put the lower one first, a natural sort the upper one)."""
+    outline = regular_polygon(6, 55.0)
+    return {
+        lower: trimesh.convex.convex_hull(np.array(prism(outline, -75.0, 0.0))),
+        upper: trimesh.convex.convex_hull(np.array(prism(outline, 0.0, 75.0))),
+    }
+
+
+def test_a_mesh_file_of_several_objects_is_one_piece_per_object(hex_yaml, tmp_path):
+    """CoACD's output: each object of the OBJ a convex piece NAME_k, in the natural order of
+    the objects' names, with the piece's face names; the peg cut in two plans as one."""
+    obj_file(tmp_path / "halves.obj", halves_mm())
+    hex_yaml["goal"]["manip"] = "peg_1/bottom"
+    path = write_mesh_task(tmp_path, hex_yaml, None, file="halves.obj")
+    task = load_task(path)
+    upper, lower = task.manipuland.pieces
+    assert (upper.name, lower.name) == ("peg_0", "peg_1")  # half2 before half10
+    assert upper.vertices[:, 2].min() == pytest.approx(0.0) and lower.vertices[:, 2].max() == 0
+    assert lower.vertices[:, 2].min() == pytest.approx(-0.075)
+    assert task.manipuland.face("peg_1/bottom").offset == pytest.approx(0.075)
+    assert "peg_0/bottom" in {f.name for p in task.manipuland.pieces for f in p.faces}
+    result = run_cli("graph", path)
+    assert result.exit_code == 0 and "(floor/top, peg_1/bottom)" in result.output
+
+
+@pytest.mark.parametrize(
+    "case, message",
+    [
+        ("not convex", r"object 'half2': not convex"),
+        (
+            "name taken",
+            r"task.yaml:\d+: manipuland: a second piece named 'peg_1' \(the first at line \d+",
+        ),
+    ],
+)
+def test_a_bad_object_or_a_name_taken_is_one_line(case, message, hex_yaml, tmp_path):
+    objects = halves_mm()
+    if case == "not convex":  # two boxes apart in one object: closed, not convex
+        apart = trimesh.creation.box(extents=[10, 10, 10])
+        apart.apply_translation([0, 0, 100])
+        objects["half2"] = trimesh.util.concatenate([objects["half2"], apart])
+    obj_file(tmp_path / "halves.obj", objects)
+    if case == "name taken":
+        hex_yaml["manipuland"]["pieces"].append({"name": "peg_1", "box": {"size": [0.01] * 3}})
+    path = write_mesh_task(tmp_path, hex_yaml, None, file="halves.obj")
+    result = run_cli("graph", path)
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert re.search(message, line), line
+
+
+def test_two_pieces_of_one_name_are_refused_with_both_lines(tmp_path):
+    data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+    data["environment"]["pieces"][2]["name"] = data["environment"]["pieces"][1]["name"]
+    path = tmp_path / "task.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    result = run_cli("graph", str(path))
+    assert result.exit_code == 2 and len(result.stderr.splitlines()) == 1, result.output
+    assert re.search(
+        r"task.yaml:\d+: environment: a second piece named 'wall_px' \(the first at line \d+",
+        result.stderr,
+    )

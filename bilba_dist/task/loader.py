@@ -14,10 +14,11 @@ from pydantic import BaseModel, ValidationError
 
 from bilba_dist.errors import BilbaError, TaskError
 from bilba_dist.geometry.contact import ContactPair
-from bilba_dist.geometry.mesh import mesh_vertices
+from bilba_dist.geometry.mesh import mesh_bodies
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
+    MAX_PIECES,
     PAPER_PLANNER,
     PRESETS,
     ConvexSpec,
@@ -214,21 +215,47 @@ def with_meshes_loaded(
 ) -> TaskSpec:
     """``spec`` with every ``mesh`` piece replaced by the ``convex`` piece it describes
     (files relative to ``folder``), so the spec alone rebuilds the task (Ray workers, logs,
-    plan files)."""
+    plan files). A file of several objects (CoACD's convex parts) gives one piece per
+    object, ``NAME_0``, ``NAME_1``, … with the piece's pose and face names."""
     parts = {}
     for key in ("manipuland", "environment"):
         part: PartSpec = getattr(spec, key)
-        pieces = []
+        pieces, origins = [], []  # origins: the index in the file of each piece
         for i, piece in enumerate(part.pieces):
-            if piece.mesh is not None:
-                try:
-                    vertices = mesh_vertices(folder / piece.mesh.file, piece.mesh.scale)
-                except BilbaError as exc:
-                    where = line_of((key, "pieces", i, "mesh", "file"), lines)
-                    raise TaskError(f"{source}:{where}: {key}.pieces[{i}]: {exc}") from None
+            if piece.mesh is None:
+                pieces.append(piece)
+                origins.append(i)
+                continue
+            where = line_of((key, "pieces", i, "mesh", "file"), lines)
+            try:
+                bodies = mesh_bodies(folder / piece.mesh.file, piece.mesh.scale)
+            except BilbaError as exc:
+                raise TaskError(f"{source}:{where}: {key}.pieces[{i}]: {exc}") from None
+            for k, vertices in enumerate(bodies):
                 convex = ConvexSpec(vertices=[tuple(v) for v in vertices], faces=piece.mesh.faces)
-                piece = piece.model_copy(update={"mesh": None, "convex": convex})
-            pieces.append(piece)
+                name = piece.name if len(bodies) == 1 else f"{piece.name}_{k}"
+                pieces.append(
+                    piece.model_copy(update={"name": name, "mesh": None, "convex": convex})
+                )
+                origins.append(i)
+        seen: dict[str, int] = {}
+        for piece, i in zip(pieces, origins, strict=True):
+            if piece.name in seen:
+                first, here = (
+                    line_of((key, "pieces", j, "name"), lines) for j in (seen[piece.name], i)
+                )
+                raise TaskError(
+                    f"{source}:{here}: {key}: a second piece named {piece.name!r} (the first "
+                    f"at line {first}; a mesh file of several objects names its pieces NAME_0, "
+                    "NAME_1, …)"
+                )
+            seen[piece.name] = i
+        if len(pieces) > MAX_PIECES:
+            where = line_of((key, "pieces"), lines)
+            raise TaskError(
+                f"{source}:{where}: {key}: {len(pieces)} pieces once its mesh files are split "
+                f"into their objects, over {MAX_PIECES}"
+            )
         parts[key] = part.model_copy(update={"pieces": pieces})
     return spec.model_copy(update=parts)
 

@@ -75,6 +75,8 @@ class MeshSpec(Strict):
 
 
 SHAPES = ("box", "convex", "mesh")
+#: Pieces a part may have (a mesh file's objects each count as one).
+MAX_PIECES = 500
 
 
 class PieceSpec(Strict):
@@ -93,7 +95,7 @@ class PieceSpec(Strict):
 
 class PartSpec(Strict):
     name: str
-    pieces: list[PieceSpec] = Field(min_length=1, max_length=500)
+    pieces: list[PieceSpec] = Field(min_length=1, max_length=MAX_PIECES)
     mass: float = Field(
         default=0.5, gt=0, le=3.0, description="[kg]; used for the manipuland (Panda payload ≤ 3)"
     )
