@@ -229,3 +229,16 @@ def test_two_pieces_of_one_name_are_refused_with_both_lines(tmp_path):
         r"task.yaml:\d+: environment: a second piece named 'wall_px' \(the first at line \d+",
         result.stderr,
     )
+
+
+@pytest.mark.slow
+def test_a_part_given_as_convex_objects_plans_end_to_end(hex_yaml, tmp_path):
+    """The hexagonal peg as two objects of one OBJ (the lower one holds the goal face)."""
+    obj_file(tmp_path / "halves.obj", halves_mm())
+    hex_yaml["goal"]["manip"] = "peg_1/bottom"
+    task = load_task(write_mesh_task(tmp_path, hex_yaml, None, file="halves.obj"))
+    result = plan(task, RolloutWorker(task), "bilba-variable", seed=0, timeout_s=120)
+    assert result.success, result.reason
+    final = result.final_belief
+    assert final is not None and all(task.goal in c for c in final.contacts)
+    assert task.goal == ("floor/top", "peg_1/bottom")
