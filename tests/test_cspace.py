@@ -278,3 +278,35 @@ def test_pruning_facets_by_their_boxes_loses_no_vertex(task_name, monkeypatch):
     for R, vertices in zip(rotations, pruned, strict=True):
         every = CObsSlice.build(task.environment, task.manipuland, R).vertices
         np.testing.assert_array_equal(vertices, every)
+
+
+@settings(max_examples=200)
+@given(
+    corners=st.integers(3, 12),
+    planes=st.lists(
+        st.tuples(st.floats(0, 2 * np.pi), st.floats(-1.2, 1.2)), min_size=1, max_size=12
+    ),
+)
+def test_clip_is_the_polygon_cut_by_every_half_plane(corners, planes):
+    """`_clip` (which skips the planes that do not cut the polygon as given) against
+    Shapely's intersection with each half-plane, as a large square beyond the line."""
+    import shapely
+
+    from bilba_dist.cspace.slice import _clip
+
+    angles = np.linspace(0, 2 * np.pi, corners, endpoint=False) + 0.1
+    polygon = np.c_[np.cos(angles), np.sin(angles)]
+    M = np.array([[np.cos(a), np.sin(a)] for a, _ in planes])
+    r = np.array([c for _, c in planes])
+    expected = shapely.Polygon(polygon)
+    for m, c in zip(M, r, strict=True):
+        t = np.array([-m[1], m[0]])
+        half = shapely.Polygon(
+            [c * m + 10 * t, c * m - 10 * t, c * m - 10 * t - 10 * m, c * m + 10 * t - 10 * m]
+        )
+        expected = expected.intersection(half)
+    clipped = _clip(polygon, M, r)
+    got = shapely.convex_hull(shapely.MultiPoint(clipped)) if len(clipped) else shapely.Polygon()
+    assert abs(got.area - expected.area) < 1e-9
+    if expected.area > 1e-6:
+        assert got.symmetric_difference(expected).area < 1e-9

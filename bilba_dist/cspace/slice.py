@@ -234,20 +234,26 @@ def _facet_region(polytopes: tuple[Polytope, ...], i: int, f: int) -> tuple[np.n
 
 
 def _clip(polygon: np.ndarray, M: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The convex 2-D ``polygon`` cut to the half-planes ``M w ≤ r`` (Sutherland–Hodgman)."""
-    for m, c in zip(M, r, strict=True):
-        s = polygon @ m - c
-        if np.all(s <= 0):
+    """The convex 2-D ``polygon`` cut to the half-planes ``M w ≤ r`` (Sutherland–Hodgman).
+    Only the half-planes that cut the polygon as given are tried (a cut polygon lies inside
+    it): a facet against one of tens of C-obstacles meets a few of its ~100 planes."""
+    outside = polygon @ M.T > r  # (corners, planes)
+    if outside.all(axis=0).any():
+        return np.zeros((0, 2))
+    for h in np.flatnonzero(outside.any(axis=0)):
+        s = (polygon @ M[h] - r[h]).tolist()  # Python floats: the same IEEE steps, less overhead
+        if max(s) <= 0:
             continue
-        if np.all(s > 0):
+        if min(s) > 0:
             return np.zeros((0, 2))
-        kept = []
-        for k in range(len(polygon)):
-            nxt = (k + 1) % len(polygon)
-            if s[k] <= 0:
-                kept.append(polygon[k])
-            if (s[k] <= 0) != (s[nxt] <= 0):
-                kept.append(polygon[k] + s[k] / (s[k] - s[nxt]) * (polygon[nxt] - polygon[k]))
+        corners, kept = polygon.tolist(), []
+        for k, ((x, y), sk) in enumerate(zip(corners, s, strict=True)):
+            nxt = (k + 1) % len(corners)
+            if sk <= 0:
+                kept.append((x, y))
+            if (sk <= 0) != (s[nxt] <= 0):
+                t = sk / (sk - s[nxt])
+                kept.append((x + t * (corners[nxt][0] - x), y + t * (corners[nxt][1] - y)))
         polygon = np.array(kept)
     return polygon
 
