@@ -12,7 +12,7 @@ from functools import cached_property
 import numpy as np
 import shapely
 
-from bilba_dist.cspace.boundary import FacetStack, boundary_vertices
+from bilba_dist.cspace.boundary import BOX_MARGIN, FacetStack, boundary_vertices
 from bilba_dist.cspace.polytope import TOL, Polytope, minkowski_polytope
 from bilba_dist.geometry.contact import ContactPair, ContactSet
 from bilba_dist.geometry.piece import Part
@@ -123,14 +123,24 @@ class CObsSlice:
 
     def _on_facets(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per point, whether it is on the union's boundary or outside it (N,), and which
-        facets it lies on, each on its own polytope's surface (N, F); within TOL."""
-        facet = self.stack.facet_slack(points)
-        per_polytope = np.maximum.reduceat(facet, self.stack.starts, axis=1)
-        on_union = per_polytope.min(axis=1) >= -TOL
-        on_surface = np.abs(per_polytope) <= TOL  # (N, P): gathered as booleans, not floats
-        on_facet = np.abs(facet) <= TOL
-        on_facet &= on_surface[:, self.stack.owner]
-        return on_union, on_facet
+        facets it lies on, each on its own polytope's surface (N, F); within TOL. A point
+        outside a polytope's box (by more than BOX_MARGIN) is outside it: only the points
+        in its box are measured against its facets (a part split into tens of pieces has
+        thousands of facets, and each point is near a few pieces)."""
+        inside = np.zeros(len(points), dtype=bool)  # strictly inside some polytope
+        on_facet = np.zeros((len(points), len(self.stack.b)), dtype=bool)
+        for p, start in zip(self.polytopes, self.stack.starts, strict=True):
+            box = (points >= p.lower - BOX_MARGIN) & (points <= p.upper + BOX_MARGIN)
+            near = np.flatnonzero(box.all(axis=1))
+            if len(near) == 0:
+                continue
+            facet = points[near] @ p.A.T - p.b
+            per_polytope = facet.max(axis=1)
+            inside[near] |= per_polytope < -TOL
+            on_facet[near, start : start + len(p.b)] = (np.abs(facet) <= TOL) & (
+                np.abs(per_polytope) <= TOL
+            )[:, None]
+        return ~inside, on_facet
 
     def mode_facets(self, mode: ContactPair) -> list[tuple[int, int]]:
         """(polytope, facet) indices of every facet labelled with ``mode``."""
