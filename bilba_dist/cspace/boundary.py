@@ -20,8 +20,9 @@ from bilba_dist.cspace.polytope import TOL, Polytope
 
 #: Planes whose normals' triple product is below this are treated as parallel.
 SINGULAR = 1e-9
-#: How far outside a facet's box a triple point may be found (rounding where three planes
-#: meet at a shallow angle) [m]: generous, since it only decides which facets are tried.
+#: How far outside a facet's or polytope's box a point on it (within TOL) may be found —
+#: rounding where three planes meet at a shallow angle, TOL's reach past a sharp corner [m]:
+#: generous, since it only decides which facets or polytopes a point is measured against.
 BOX_MARGIN = 1e-6
 
 
