@@ -86,18 +86,24 @@ def _facet_triples(
     boxes: tuple[tuple[np.ndarray, np.ndarray], ...],
 ) -> np.ndarray:
     """Points where one facet plane of each polytope of ``triple`` meet, inside all three.
-    Only facets whose box (``boxes``: `_facet_boxes` of each) meets the box the three
-    polytopes share can hold such a point."""
+    Such a point lies on all three facets, so only facets whose boxes (``boxes``:
+    `_facet_boxes` of each) meet the box the three polytopes share and each other's are
+    tried: first the pairs of ``a`` and ``b``, then the facets of ``c`` that meet both."""
     lower = np.max([p.lower for p in triple], axis=0) - BOX_MARGIN
     upper = np.min([p.upper for p in triple], axis=0) + BOX_MARGIN
-    facets = [
-        np.flatnonzero(np.all((low <= upper) & (lower <= high), axis=1)) for low, high in boxes
-    ]
-    if any(len(f) == 0 for f in facets):
-        return np.zeros((0, 3))
+    near = []  # per polytope: its facets in the shared box, with their boxes
+    for low, high in boxes:
+        keep = np.flatnonzero(np.all((low <= upper) & (lower <= high), axis=1))
+        if len(keep) == 0:
+            return np.zeros((0, 3))
+        near.append((keep, low[keep] - BOX_MARGIN, high[keep] + BOX_MARGIN))
+    (fa, lo_a, hi_a), (fb, lo_b, hi_b), (fc, lo_c, hi_c) = near
+    pa, pb = np.nonzero(_boxes_meet(lo_a, hi_a, lo_b, hi_b))
+    pair, pc = np.nonzero(
+        _boxes_meet(np.maximum(lo_a[pa], lo_b[pb]), np.minimum(hi_a[pa], hi_b[pb]), lo_c, hi_c)
+    )
     a, b, c = triple
-    grid = np.meshgrid(*facets, indexing="ij")
-    ia, ib, ic = (g.ravel() for g in grid)
+    ia, ib, ic = fa[pa[pair]], fb[pb[pair]], fc[pc]  # in the order of a full grid
     normals = np.stack([a.A[ia], b.A[ib], c.A[ic]], axis=1)  # (T, 3, 3)
     offsets = np.stack([a.b[ia], b.b[ib], c.b[ic]], axis=1)
     det = np.linalg.det(normals)
@@ -106,6 +112,11 @@ def _facet_triples(
     for p in triple:
         points = points[_inside_closed(p, points)]
     return points
+
+
+def _boxes_meet(lo1: np.ndarray, hi1: np.ndarray, lo2: np.ndarray, hi2: np.ndarray) -> np.ndarray:
+    """(N, M): whether box n of the first set meets box m of the second."""
+    return np.all((lo1[:, None] <= hi2[None]) & (lo2[None] <= hi1[:, None]), axis=2)
 
 
 def dedupe(points: np.ndarray, radius: float = 10 * TOL) -> np.ndarray:
