@@ -262,3 +262,16 @@ def test_a_fail_cost_out_of_range_is_one_line(tmp_path, peg_yaml, fail_cost):
     result = run_cli("plan", str(path), "--workers", "0", "--no-log")
     assert result.exit_code == 2 and "fail_cost" in result.stderr
     assert len(result.stderr.strip().splitlines()) == 1
+
+
+def test_a_part_that_cannot_reach_its_goal_face_is_one_line_saying_why(tmp_path):
+    """A square peg 2 mm wider than its hole (as a hole's convex pieces that fill its
+    clearance would make it): `bilba graph` says the goal cannot be touched, exit 2."""
+    from tests.conftest import prism_file
+    from tests.test_task_files import run_cli
+
+    result = run_cli("graph", str(prism_file(tmp_path, 4, -0.002)))
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert "the goal contact (floor/top, peg/bottom) does not occur" in line
+    assert "cannot touch that face without entering another piece" in line

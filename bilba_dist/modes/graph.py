@@ -77,7 +77,11 @@ class ModeGraph:
     def schedule(self, start: ContactPair = FREE) -> list[ContactPair]:
         """The cheapest mode sequence from ``start`` to the goal (both included)."""
         if self.goal not in self.graph:
-            raise NoScheduleError(f"the goal contact {self.goal} does not occur on the C-obs slice")
+            raise NoScheduleError(
+                f"the goal contact {self.goal} does not occur on the C-obs slice: at this "
+                "rotation the part cannot touch that face without entering another piece (no "
+                "clearance there — or a split mesh's convex pieces filling it?)"
+            )
         try:
             return list(nx.dijkstra_path(self.graph, start, self.goal, weight="cost"))
         except (nx.NetworkXNoPath, nx.NodeNotFound):
