@@ -235,6 +235,15 @@ def test_recover_keeps_what_follows_a_damaged_chunk(damage, planned, tmp_path):
     lost = {(m.log_time, m.data) for m in in_chunk}
     assert in_chunk and kept == [r for r in original if (r[1], r[2]) not in lost]
     assert kept[-1] == original[-1] and len(starts) > 8  # later chunks were kept
+    gone = [
+        json.loads(d)["index"]
+        for topic, t, d in original
+        if topic == "/transition" and (t, d) in lost
+    ]
+    assert len(gone) == 1  # the writer ends a chunk at each transition
+    said = f"transitions missing (lost with a damaged chunk): {', '.join(map(str, gone))}"
+    assert (said in result.output) == bool(gone)
+    assert (said in run("logs", "summary", str(tmp_path / "r.mcap")).output) == bool(gone)
 
 
 def test_recover_refuses_a_log_whose_header_is_damaged(planned, tmp_path):

@@ -50,6 +50,9 @@ def _summary_rows(log: Log, path: Path, schedules: bool) -> list[str]:
         f"{seconds:7.1f} {transitions:>6} {len(log.messages['/schedule']):>5}  {status}"
     ]
     if schedules:
+        missing = inspect.missing_transitions(log)
+        if missing:
+            rows.append("  " + inspect.missing_text(missing))
         for k, s in enumerate(log.json("/schedule")):
             rows.append(f"  schedule {k}: " + " -> ".join(map(mode_text, s["schedule"])))
     return rows
@@ -81,12 +84,17 @@ def plan_command(file: Path, out: Path | None) -> None:
 )
 @user_errors
 def recover_command(file: Path, out: Path | None) -> None:
-    """Rewrite a truncated log into a valid one holding everything readable."""
+    """Rewrite a truncated or damaged log into a valid one holding everything readable."""
     out = out or file.with_suffix(".recovered.mcap")
     refuse_overwriting({"--out": out}, {"the log": file})
     make_folder(out)
     kept = recover(file, out)
-    click.echo(f"{out}: {kept} messages recovered")
+    with reading(read_log(out)) as log:
+        missing = inspect.missing_transitions(log)
+    click.echo(
+        f"{out}: {kept} messages recovered"
+        + (f"; {inspect.missing_text(missing)}" if missing else "")
+    )
 
 
 @logs.command()

@@ -21,6 +21,20 @@ def _contacts(contacts: list[list[str]]) -> str:
     return ", ".join(mode_text(c) for c in contacts) or "free"
 
 
+def missing_transitions(log: Log) -> list[int]:
+    """The transition indices a recovered log lacks (each transition is numbered in order;
+    a damaged chunk lost the ones between), up to its last one."""
+    indices = {t["index"] for t in log.json("/transition")}
+    return sorted(set(range(max(indices, default=-1) + 1)) - indices)
+
+
+def missing_text(missing: list[int]) -> str:
+    shown = ", ".join(map(str, missing[:10]))
+    return f"transitions missing (lost with a damaged chunk): {shown}" + (
+        f" … ({len(missing)} in all)" if len(missing) > 10 else ""
+    )
+
+
 def transition(log: Log, step: int) -> dict[str, Any]:
     transitions = log.json("/transition")
     if not transitions:
