@@ -48,3 +48,27 @@ def test_all_particles_in_but_check_particles_out_names_robust_acceptance():
 def test_check_particles_are_not_blamed_while_particles_are_missing():
     text = explain([Blocked(CHAMFER, 6, 7, 0, 0.004, 0.010, checked=14, n_check=14)])
     assert text.endswith("no motion brought more than 6 of 7 particles into it")
+
+
+def test_a_goal_met_at_its_edge_is_warned_of(peg):
+    """The peg's default plan ends on the floor's top alone: no warning. The same final
+    belief with particle 1 touching the floor's side face too (the peg hanging on the edge
+    of a floor wider than its hole, as one of our tasks did): a warning naming both."""
+    import dataclasses
+
+    from bilba_dist.planning.bilba import plan
+    from bilba_dist.planning.diagnosis import goal_edge_warning
+    from bilba_dist.workers.rollout_worker import RolloutWorker
+
+    result = plan(peg, RolloutWorker(peg), "bilba-variable", seed=0, timeout_s=120)
+    final = result.final_belief
+    assert result.success and final is not None
+    assert goal_edge_warning(peg.goal, final) is None
+    edge = ContactPair("floor/+y", peg.goal.manip)
+    contacts = tuple(c | {edge} if i == 1 else c for i, c in enumerate(final.contacts))
+    warning = goal_edge_warning(peg.goal, dataclasses.replace(final, contacts=contacts))
+    assert warning is not None and warning.startswith("particles 1 end in the goal")
+    assert f"touching also {edge}" in warning and "floor/+z exposed" in warning
+    other = ContactPair("wall_px/inner", peg.goal.manip)  # another piece: not the goal's edge
+    contacts = tuple(c | {other} for c in final.contacts)
+    assert goal_edge_warning(peg.goal, dataclasses.replace(final, contacts=contacts)) is None

@@ -23,6 +23,7 @@ from bilba_dist.cli.options import (
 from bilba_dist.cli.outputs import refuse_overwriting, task_file
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
+from bilba_dist.planning.diagnosis import goal_edge_warning
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
@@ -290,4 +291,6 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
     if result.final_belief is not None:
         for i, contacts in enumerate(result.final_belief.contacts):
             click.echo(f"particle {i}: {', '.join(sorted(map(str, contacts))) or 'free'}")
+        if result.success and (edge := goal_edge_warning(task.goal, result.final_belief)):
+            click.echo(f"warning: {edge}", err=True)
     click.echo(f"plan file  {out}")

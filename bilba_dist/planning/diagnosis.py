@@ -90,3 +90,29 @@ def explain(failures: list[Blocked]) -> str:
             "it that funnels them (a chamfer), would help"
         )
     return text
+
+
+def goal_edge_warning(goal: ContactPair, belief: Belief) -> str | None:
+    """A warning when a plan's final particles touch the goal's part face with another face
+    of the goal's environment piece too — the goal face met at its edge. The built-ins'
+    floors fill their holes exactly, and none of 89 of their plans (and of our meshed
+    tasks) ends so; a floor as wide as the plate did, the peg hanging on its outer edge."""
+    piece = goal.env.split("/")[0]
+    edges = {
+        i: sorted(
+            c
+            for c in contacts
+            if c.manip == goal.manip and c.env != goal.env and c.env.split("/")[0] == piece
+        )
+        for i, contacts in enumerate(belief.contacts)
+        if goal in contacts
+    }
+    edges = {i: found for i, found in edges.items() if found}
+    if not edges:
+        return None
+    pairs = sorted({str(c) for found in edges.values() for c in found})
+    return (
+        f"particles {', '.join(map(str, edges))} end in the goal touching also "
+        f"{', '.join(pairs)}: the goal face met at its edge — is {goal.env} exposed outside "
+        "the assembly? (docs/task-files.md: a goal face must exist only where the part is home)"
+    )
