@@ -242,3 +242,16 @@ def test_a_part_given_as_convex_objects_plans_end_to_end(hex_yaml, tmp_path):
     final = result.final_belief
     assert final is not None and all(task.goal in c for c in final.contacts)
     assert task.goal == ("floor/top", "peg_1/bottom")
+
+
+def test_the_round_peg_example_is_three_mesh_files_and_reaches_its_goal():
+    """examples/round-peg: a plate split by CoACD into 16 convex objects (pieces plate_0 …
+    plate_15), a floor as wide as the hole, a round peg; its schedule ends in the goal."""
+    path = Path(__file__).parents[1] / "examples" / "round-peg" / "round-peg.yaml"
+    task = load_task(str(path))
+    assert [p.name for p in task.environment.pieces] == ["floor"] + [
+        f"plate_{k}" for k in range(16)
+    ]
+    result = run_cli("graph", str(path))
+    assert result.exit_code == 0, result.output
+    assert result.output.rstrip().endswith("-> (floor/top, peg/bottom)")
