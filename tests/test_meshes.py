@@ -255,3 +255,17 @@ def test_the_round_peg_example_is_three_mesh_files_and_reaches_its_goal():
     result = run_cli("graph", str(path))
     assert result.exit_code == 0, result.output
     assert result.output.rstrip().endswith("-> (floor/top, peg/bottom)")
+
+
+def test_more_piece_pairs_than_a_slice_can_take_is_one_line(hex_yaml, tmp_path):
+    """7 environment pieces × 40 objects of one OBJ = 280 C-obstacles: refused before the
+    slice (whose time grows faster than their number: hours at 1 400)."""
+    boxes = {f"b{k}": trimesh.creation.box(extents=[2, 2, 2]) for k in range(40)}
+    for k, box in enumerate(boxes.values()):
+        box.apply_translation([0, 0, 3.0 * k])
+    obj_file(tmp_path / "boxes.obj", boxes)
+    hex_yaml["goal"]["manip"] = "peg_0/bottom"
+    result = run_cli("graph", write_mesh_task(tmp_path, hex_yaml, None, file="boxes.obj"))
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert "7 environment pieces × 40 manipuland pieces = 280 C-obstacles, over 256" in line

@@ -18,6 +18,7 @@ from bilba_dist.geometry.mesh import mesh_bodies
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
+    MAX_PIECE_PAIRS,
     MAX_PIECES,
     PAPER_PLANNER,
     PRESETS,
@@ -257,6 +258,14 @@ def with_meshes_loaded(
                 f"into their objects, over {MAX_PIECES}"
             )
         parts[key] = part.model_copy(update={"pieces": pieces})
+    env, manip = (len(parts[key].pieces) for key in ("environment", "manipuland"))
+    if env * manip > MAX_PIECE_PAIRS:
+        raise TaskError(
+            f"{source}: {env} environment pieces × {manip} manipuland pieces = {env * manip} "
+            f"C-obstacles, over {MAX_PIECE_PAIRS}: a C-obs slice takes minutes at ~100 and "
+            "grows faster than their number; merge pieces (a coarser CoACD threshold, fewer "
+            "objects)"
+        )
     return spec.model_copy(update=parts)
 
 
