@@ -24,6 +24,9 @@ SINGULAR = 1e-9
 #: rounding where three planes meet at a shallow angle, TOL's reach past a sharp corner [m]:
 #: generous, since it only decides which facets or polytopes a point is measured against.
 BOX_MARGIN = 1e-6
+#: Points measured against every facet at once: (N, F) arrays of a part split into tens of
+#: convex pieces (thousands of facets) for a million probes would take tens of GB.
+CHUNK_POINTS = 4096
 
 
 def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndarray:
@@ -39,11 +42,7 @@ def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndar
             triple = (polytopes[i], polytopes[j], polytopes[k])
             candidates.append(_facet_triples(triple, (boxes[i], boxes[j], boxes[k])))
     points = np.concatenate([c for c in candidates if len(c)]) if candidates else np.zeros((0, 3))
-    outside = [
-        stack.slack(chunk).min(axis=1) >= -TOL
-        for chunk in np.array_split(points, 1 + len(points) // 4096)
-    ]
-    points = points[np.concatenate(outside)]
+    points = points[stack.slack(points).min(axis=1) >= -TOL]
     return dedupe(points)
 
 
@@ -140,15 +139,21 @@ class FacetStack:
         self.b = np.concatenate([p.b for p in polytopes])
         counts = [len(p.b) for p in polytopes]
         self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
-        self.owner = np.repeat(np.arange(len(polytopes)), counts)
 
     def facet_slack(self, points: np.ndarray) -> np.ndarray:
         """(N, F) signed distance of each point to each facet plane [m]."""
         return np.atleast_2d(points) @ self.A.T - self.b
 
     def slack(self, points: np.ndarray) -> np.ndarray:
-        """(N, P) per-polytope slack: < 0 strictly inside, ~0 on the boundary."""
-        per_facet = self.facet_slack(points)
-        if per_facet.shape[0] == 0:
+        """(N, P) per-polytope slack: < 0 strictly inside, ~0 on the boundary. Computed
+        CHUNK_POINTS at a time: the (N, F) facet slack of tens of thousands of points
+        against a part split into tens of pieces would take gigabytes."""
+        points = np.atleast_2d(points)
+        if len(points) == 0:
             return np.zeros((0, len(self.starts)))
-        return np.maximum.reduceat(per_facet, self.starts, axis=1)
+        return np.concatenate(
+            [
+                np.maximum.reduceat(self.facet_slack(chunk), self.starts, axis=1)
+                for chunk in np.split(points, range(CHUNK_POINTS, len(points), CHUNK_POINTS))
+            ]
+        )

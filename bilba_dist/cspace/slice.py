@@ -12,7 +12,12 @@ from functools import cached_property
 import numpy as np
 import shapely
 
-from bilba_dist.cspace.boundary import BOX_MARGIN, FacetStack, boundary_vertices
+from bilba_dist.cspace.boundary import (
+    BOX_MARGIN,
+    CHUNK_POINTS,
+    FacetStack,
+    boundary_vertices,
+)
 from bilba_dist.cspace.polytope import TOL, Polytope, minkowski_polytope
 from bilba_dist.geometry.contact import ContactPair, ContactSet
 from bilba_dist.geometry.piece import Part
@@ -25,9 +30,6 @@ PROBE_M = 1e-5
 #: Probe directions in each facet's plane: 12, each 15° off the plane's axes, so that on the
 #: mostly axis-aligned faces of these parts no probe runs along an edge of a region.
 PROBE_ANGLES = (np.arange(12) + 0.5) * np.pi / 6
-#: Points whose contacts are computed at once: (N, F) arrays of a part split into tens of
-#: convex pieces (thousands of facets) for a million probes would take tens of GB.
-CHUNK_POINTS = 4096
 
 
 @dataclass(frozen=True)
