@@ -155,14 +155,12 @@ def test_the_mesh_task_plans_end_to_end_from_its_stl():
 
 
 def obj_file(path: Path, objects: dict[str, trimesh.Trimesh]) -> None:
-    """An OBJ file with one ``o`` object per mesh, as CoACD writes its convex parts."""
-    lines, base = [], 1
+    """An OBJ file with one ``o`` object per mesh, as CoACD writes its convex parts
+    (trimesh's OBJ export of a scene, as examples/round-peg/make.py writes one)."""
+    scene = trimesh.Scene()
     for name, mesh in objects.items():
-        lines.append(f"o {name}")
-        lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in mesh.vertices]
-        lines += [f"f {a + base} {b + base} {c + base}" for a, b, c in mesh.faces]
-        base += len(mesh.vertices)
-    path.write_text("\n".join(lines) + "\n")
+        scene.add_geometry(mesh, geom_name=name)
+    scene.export(path)
 
 
 def halves_mm(upper: str = "half2", lower: str = "half10") -> dict[str, trimesh.Trimesh]:
