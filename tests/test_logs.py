@@ -177,13 +177,20 @@ def test_ctrl_c_on_bilba_plan_is_one_line_and_leaves_a_readable_log(tmp_path):
     assert summary.exit_code == 0 and "unfinished" in summary.output
 
 
-def record_at(data: bytes, opcode: int) -> int:
-    """Where the first record of ``opcode`` starts (MCAP records: an opcode, a u64 length,
-    the content)."""
-    at = len(MAGIC)
-    while data[at] != opcode:
+def record_starts(data: bytes, opcode: int) -> list[int]:
+    """Where each top-level record of ``opcode`` starts, up to the footer (MCAP records: an
+    opcode, a u64 length, the content)."""
+    at, starts = len(MAGIC), []
+    while data[at] != 0x02:  # the footer
+        if data[at] == opcode:
+            starts.append(at)
         at += 9 + int.from_bytes(data[at + 1 : at + 9], "little")
-    return at
+    return starts
+
+
+def record_at(data: bytes, opcode: int) -> int:
+    """Where the first record of ``opcode`` starts."""
+    return record_starts(data, opcode)[0]
 
 
 def with_huge_chunk_length(data: bytes) -> bytes:
@@ -200,23 +207,13 @@ def with_long_index_map(data: bytes) -> bytes:
     return data[:field] + (2**20).to_bytes(4, "little") + data[field + 4 :]
 
 
-def chunk_starts(data: bytes) -> list[int]:
-    """Where each chunk of the data section starts."""
-    at, starts = len(MAGIC), []
-    while data[at] != 0x0F:  # DataEnd: the summary follows
-        if data[at] == 0x06:
-            starts.append(at)
-        at += 9 + int.from_bytes(data[at + 1 : at + 9], "little")
-    return starts
-
-
 @pytest.mark.parametrize("damage", ["a byte of its messages", "its length", "its start"])
 def test_recover_keeps_what_follows_a_damaged_chunk(damage, planned, tmp_path):
     """The writer ends a chunk at each transition: damaging one chunk loses its own messages,
     not the later ones — reading goes on after it (by its length, or, where the length is
     what broke, at the next chunk that reads with its checksum)."""
     data = planned[1].read_bytes()
-    starts = chunk_starts(data)
+    starts = record_starts(data, 0x06)
     middle = starts[len(starts) // 2]
     end = middle + 9 + int.from_bytes(data[middle + 1 : middle + 9], "little")
     chunk = Chunk.read(ReadDataStream(io.BytesIO(data[middle + 9 : end])))
@@ -249,7 +246,7 @@ def test_recover_keeps_what_follows_a_damaged_chunk(damage, planned, tmp_path):
 def test_recover_refuses_a_log_whose_header_is_damaged(planned, tmp_path):
     """The first chunk holds the topics and /metadata: without it there is no log to write."""
     bad = bytearray(planned[1].read_bytes())
-    first = chunk_starts(bytes(bad))[0]
+    first = record_at(bytes(bad), 0x06)
     bad[first + 9 + 300] ^= 0xFF
     (tmp_path / "bad.mcap").write_bytes(bytes(bad))
     result = run("logs", "recover", str(tmp_path / "bad.mcap"), "--out", str(tmp_path / "r.mcap"))
