@@ -3,6 +3,8 @@
 The CLI turns any `BilbaError` into one line on stderr and exit code 2.
 """
 
+from collections.abc import Iterable
+
 
 class BilbaError(Exception):
     """Root of every error bilba_dist raises on purpose."""
@@ -29,3 +31,12 @@ def first_line(exc: BaseException, default: str = "") -> str:
     one-line error quotes of an exception from a library."""
     text = str(exc).strip()
     return text.splitlines()[0] if text else default
+
+
+def listed(items: Iterable[object], limit: int = 12) -> str:
+    """``items`` for a one-line message: all of them, or the first ``limit`` and how many
+    there are (a part split into hundreds of pieces, a log missing thousands of records)."""
+    shown = [str(item) for item in items]
+    if len(shown) <= limit:
+        return ", ".join(shown)
+    return f"{', '.join(shown[:limit])} … ({len(shown)} in all)"

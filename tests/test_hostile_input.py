@@ -1,6 +1,7 @@
 """Hostile and careless input: every bad task, plan or jobs file is one line on stderr and
 exit code 2, within 5 s, and nothing partial is written (no plan file, no log, no batch)."""
 
+import hashlib
 import json
 import os
 import subprocess
@@ -216,7 +217,24 @@ def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
             "task.spec.friction",
         ),
         "huge file": (text + " " * (17 * 2**20), "byte limit"),
+        "two pieces of one name, hash recomputed": (
+            rehashed(doc, twice_named(spec)),
+            "part 'hole': piece names must be unique: floor",
+        ),
     }
+
+
+def twice_named(spec: dict) -> dict:
+    pieces = spec["environment"]["pieces"]
+    renamed = [pieces[0], {**pieces[1], "name": pieces[0]["name"]}, *pieces[2:]]
+    return {**spec, "environment": {**spec["environment"], "pieces": renamed}}
+
+
+def rehashed(doc: dict, spec: dict) -> str:
+    """A plan file whose embedded task is ``spec``, with the hash of ``spec`` (an edit the
+    hash does not catch)."""
+    digest = hashlib.sha256(json.dumps(spec, sort_keys=True).encode()).hexdigest()
+    return json.dumps({**doc, "task": {**doc["task"], "spec": spec, "hash": digest}})
 
 
 def test_hostile_plan_files_are_one_line(plan_text, tmp_path):

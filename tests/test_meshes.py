@@ -255,6 +255,25 @@ def test_the_round_peg_example_is_three_mesh_files_and_reaches_its_goal():
     assert result.output.rstrip().endswith("-> (floor/top, peg/bottom)")
 
 
+def test_a_goal_face_typo_on_a_mesh_names_the_named_faces_first(tmp_path):
+    """A mesh piece has a facet f0, f1, … for each face the file names none for: the
+    message for a typo leads with the names the user gave, and counts the rest."""
+    folder = Path(__file__).parents[1] / "examples" / "round-peg"
+    data = yaml.safe_load((folder / "round-peg.yaml").read_text())
+    for part in ("manipuland", "environment"):
+        for piece in data[part]["pieces"]:
+            piece["mesh"]["file"] = str(folder / piece["mesh"]["file"])
+    data["goal"]["manip"] = "peg/botom"
+    (path := tmp_path / "typo.yaml").write_text(yaml.safe_dump(data))
+    result = run_cli("graph", str(path))
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert line.endswith(
+        "goal.manip: piece 'peg' has no face 'peg/botom'; its faces: peg/bottom and 33 "
+        "unnamed facets peg/f0 … f33 (name one by its outward normal under 'faces:')"
+    )
+
+
 def test_more_piece_pairs_than_a_slice_can_take_is_one_line(hex_yaml, tmp_path):
     """7 environment pieces × 40 objects of one OBJ = 280 C-obstacles: refused before the
     slice (whose time grows faster than their number: hours at 1 400)."""

@@ -96,7 +96,12 @@ BAD_FILES = {
     ),
     "goal face that does not exist": (
         lambda d: _set(d, "floor/+w", "goal", "env"),
-        r"goal\.env: 'hole' has no face 'floor/\+w'",
+        r"no face 'floor/\+w'; its faces: floor/-z, floor/-y, floor/\+x, floor/-x, floor/\+y, "
+        r"floor/\+z$",
+    ),
+    "goal face of a piece that does not exist": (
+        lambda d: _set(d, "+z", "goal", "env"),
+        r"goal\.env: part 'hole' has no piece '\+z' \(faces are PIECE/FACE\); pieces: floor, ",
     ),
     "degenerate piece": (
         lambda d: _set(d, {"size": [0.06, 0.06, 0]}, "manipuland", "pieces", 0, "box"),

@@ -5,6 +5,7 @@ Coordinates are in the part's own frame, in metres. A face is named ``piece/face
 piece frame) or ``f0, f1, …`` in a fixed order (by normal, descending x, then y, then z).
 """
 
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
@@ -12,7 +13,7 @@ from functools import cached_property
 import numpy as np
 import pinocchio as pin
 
-from bilba_dist.errors import GeometryError
+from bilba_dist.errors import GeometryError, listed
 from bilba_dist.geometry.hull import convex_hull, face_edges, planar_faces
 from bilba_dist.geometry.pose import transform_points
 
@@ -28,6 +29,8 @@ BOX_FACES = {
 NAME_MATCH_ANGLE = np.deg2rad(1.0)
 #: A listed vertex further than this inside the hull means the piece is not convex [m].
 CONVEX_TOL = 1e-9
+#: The name a facet gets when the task file names none for it (``f0``, ``f1``, …).
+UNNAMED = re.compile(r"f\d+")
 
 
 @dataclass(frozen=True)
@@ -60,8 +63,20 @@ class ConvexPiece:
         for face in self.faces:
             if face.name == name:
                 return face
-        known = ", ".join(f.name for f in self.faces)
-        raise GeometryError(f"piece {self.name!r} has no face {name!r}; its faces: {known}")
+        raise GeometryError(f"piece {self.name!r} has no face {name!r}; its faces: {self._known()}")
+
+    def _known(self) -> str:
+        """The faces a user named first (a mesh has dozens of facets ``f0``, ``f1``, … in
+        order of their normals, and a typo's message should show the name it missed)."""
+        unnamed = [f.name for f in self.faces if UNNAMED.fullmatch(f.name.rpartition("/")[2])]
+        named = [f.name for f in self.faces if f.name not in unnamed]
+        if not unnamed:
+            return listed(named)
+        return (
+            f"{listed(named) + ' and ' if named else ''}{len(unnamed)} unnamed facets "
+            f"{self.name}/f0 … f{len(self.faces) - 1} (name one by its outward normal under "
+            "'faces:')"
+        )
 
     def faces_at(self, point: np.ndarray, tol: float = 1e-6) -> list[int]:
         """Indices of the faces whose plane holds ``point`` (part frame), if the point is on
@@ -176,7 +191,8 @@ class Part:
     def __post_init__(self) -> None:
         names = [p.name for p in self.pieces]
         if len(set(names)) != len(names):
-            raise GeometryError(f"part {self.name!r}: piece names must be unique, got {names}")
+            twice = sorted({n for n in names if names.count(n) > 1})
+            raise GeometryError(f"part {self.name!r}: piece names must be unique: {listed(twice)}")
         if not self.pieces:
             raise GeometryError(f"part {self.name!r} has no pieces")
 
@@ -204,5 +220,8 @@ class Part:
         for piece in self.pieces:
             if piece.name == piece_name:
                 return piece
-        known = ", ".join(p.name for p in self.pieces)
-        raise GeometryError(f"part {self.name!r} has no piece {piece_name!r}; pieces: {known}")
+        known = listed(p.name for p in self.pieces)
+        raise GeometryError(
+            f"part {self.name!r} has no piece {piece_name!r} (faces are PIECE/FACE); "
+            f"pieces: {known}"
+        )

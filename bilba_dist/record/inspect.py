@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from bilba_dist.errors import BilbaError
+from bilba_dist.errors import BilbaError, listed
 from bilba_dist.record.reader import Log
 
 
@@ -29,10 +29,7 @@ def missing_transitions(log: Log) -> list[int]:
 
 
 def missing_text(missing: list[int]) -> str:
-    shown = ", ".join(map(str, missing[:10]))
-    return f"transitions missing (lost with a damaged chunk): {shown}" + (
-        f" … ({len(missing)} in all)" if len(missing) > 10 else ""
-    )
+    return f"transitions missing (lost with a damaged chunk): {listed(missing, 10)}"
 
 
 def transition(log: Log, step: int) -> dict[str, Any]:

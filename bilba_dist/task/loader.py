@@ -12,7 +12,7 @@ import numpy as np
 import pinocchio as pin
 from pydantic import BaseModel, ValidationError
 
-from bilba_dist.errors import BilbaError, TaskError
+from bilba_dist.errors import BilbaError, GeometryError, TaskError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.mesh import mesh_bodies
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
@@ -146,10 +146,10 @@ def build_task(spec: TaskSpec, source: str) -> Task:
         (environment, goal.env, "goal.env"),
         (manipuland, goal.manip, "goal.manip"),
     ):
-        if face not in part.face_names:
-            raise TaskError(
-                f"{key}: {part.name!r} has no face {face!r}; faces: {', '.join(part.face_names)}"
-            )
+        try:
+            part.face(face)
+        except GeometryError as exc:
+            raise TaskError(f"{key}: {exc}") from None
     X_GM, X_WO, X_WG0 = (
         to_pose(spec.grasp),
         to_pose(spec.environment_pose),
