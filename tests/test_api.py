@@ -69,3 +69,33 @@ def test_file_functions_take_str_paths_as_well_as_paths(default_plan_file, tmp_p
     log = LogWriter(str(log_path), plan.task(), "bilba-variable", seed=0)
     log.finish(dumps(json.loads(copy.read_text())), {"success": True})
     assert read_log(str(log_path)).json("/metadata")[0]["seed"] == 0
+
+
+def test_a_task_built_in_python_loads_as_its_file_would(tmp_path):
+    """`load_task` takes what a task file holds as a mapping: the same task as the file
+    (hash), its errors one line naming the task (no line numbers to give), and mesh files
+    relative to ``folder``."""
+    import yaml
+
+    from bilba_dist.errors import BilbaError
+    from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
+    from tests.conftest import prism_file
+
+    data = peg_in_hole_task("7-gon", [regular_polygon(7, 0.05)], 0.001, 0.004, None)
+    from_file = bilba_dist.load_task(prism_file(tmp_path, 7, 0.001))
+    assert bilba_dist.load_task(data).hash == from_file.hash
+    assert bilba_dist.load_task(data, ["grasp.x=1cm"]).spec.uncertainty == {"grasp.x": 0.01}
+    with pytest.raises(BilbaError, match=r"^task '7-gon': friction: Input should be greater"):
+        bilba_dist.load_task({**data, "friction": -1})
+    example = Path(__file__).parents[1] / "examples" / "round-peg"
+    meshed = yaml.safe_load((example / "round-peg.yaml").read_text())
+    assert len(bilba_dist.load_task(meshed, folder=example).environment.pieces) == 17
+    with pytest.raises(BilbaError, match=r"^task 'round-peg': manipuland\.pieces\[0\]: mesh "):
+        bilba_dist.load_task(meshed, folder=tmp_path)
+    twice = {**data, "environment": {**data["environment"]}}
+    twice["environment"]["pieces"] = [
+        *data["environment"]["pieces"],
+        data["environment"]["pieces"][0],
+    ]
+    with pytest.raises(BilbaError, match=r"^task '7-gon': environment: a second piece named"):
+        bilba_dist.load_task(twice)

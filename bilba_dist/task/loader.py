@@ -2,9 +2,10 @@
 
 import hashlib
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from importlib import resources
+from os import PathLike
 from pathlib import Path
 from typing import Any
 
@@ -90,12 +91,23 @@ def resolve_task_path(name_or_path: str) -> Path:
     )
 
 
-def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Task:
-    """Load and validate a task; ``uncertainty`` (``["grasp.pitch=2deg", …]``) replaces the
-    file's bounds when given."""
-    path = resolve_task_path(name_or_path)
-    source = str(path)
-    data, lines = load_yaml_with_lines(read_text(path), source)
+def load_task(
+    task: str | PathLike[str] | Mapping[str, Any],
+    uncertainty: Sequence[str] | None = None,
+    folder: str | PathLike[str] | None = None,
+) -> Task:
+    """Load and validate a task: a built-in name, a task file, or what a task file holds
+    as a mapping (a task built in Python: its mesh files relative to ``folder``, by default
+    the working directory). ``uncertainty`` (``["grasp.pitch=2deg", …]``) replaces the
+    task's bounds when given."""
+    if isinstance(task, Mapping):
+        name = task.get("name")
+        source = f"task {name!r}" if isinstance(name, str) else "task"
+        data, lines, base = dict(task), dict[Location, int](), Path(folder or ".")
+    else:
+        path = resolve_task_path(str(task))
+        source, base = str(path), path.parent
+        data, lines = load_yaml_with_lines(read_text(path), source)
     if not isinstance(data, dict):
         raise TaskError(f"{source}: a task file must be a YAML mapping at the top level")
     if uncertainty:
@@ -104,7 +116,7 @@ def load_task(name_or_path: str, uncertainty: Sequence[str] | None = None) -> Ta
         spec = TaskSpec.model_validate(data)
     except ValidationError as exc:
         raise TaskError(describe_error(exc, source, lines)) from None
-    spec = with_meshes_loaded(spec, path.parent, source, lines)
+    spec = with_meshes_loaded(spec, base, source, lines)
     try:
         return build_task(spec, source)
     except BilbaError as exc:
@@ -227,11 +239,11 @@ def with_meshes_loaded(
                 pieces.append(piece)
                 origins.append(i)
                 continue
-            where = line_of((key, "pieces", i, "mesh", "file"), lines)
+            where = at(source, (key, "pieces", i, "mesh", "file"), lines)
             try:
                 bodies = mesh_bodies(folder / piece.mesh.file, piece.mesh.scale)
             except BilbaError as exc:
-                raise TaskError(f"{source}:{where}: {key}.pieces[{i}]: {exc}") from None
+                raise TaskError(f"{where}: {key}.pieces[{i}]: {exc}") from None
             for k, vertices in enumerate(bodies):
                 convex = ConvexSpec(vertices=[tuple(v) for v in vertices], faces=piece.mesh.faces)
                 name = piece.name if len(bodies) == 1 else f"{piece.name}_{k}"
@@ -242,20 +254,19 @@ def with_meshes_loaded(
         seen: dict[str, int] = {}
         for piece, i in zip(pieces, origins, strict=True):
             if piece.name in seen:
-                first, here = (
-                    line_of((key, "pieces", j, "name"), lines) for j in (seen[piece.name], i)
-                )
+                j = seen[piece.name]
+                first = line_of((key, "pieces", j, "name"), lines)
                 raise TaskError(
-                    f"{source}:{here}: {key}: a second piece named {piece.name!r} (the first "
-                    f"at line {first}; a mesh file of several objects names its pieces NAME_0, "
-                    "NAME_1, …)"
+                    f"{at(source, (key, 'pieces', i, 'name'), lines)}: {key}: a second piece "
+                    f"named {piece.name!r} (the first "
+                    f"{f'at line {first}' if first is not None else f'is pieces[{j}]'}; a mesh "
+                    "file of several objects names its pieces NAME_0, NAME_1, …)"
                 )
             seen[piece.name] = i
         if len(pieces) > MAX_PIECES:
-            where = line_of((key, "pieces"), lines)
             raise TaskError(
-                f"{source}:{where}: {key}: {len(pieces)} pieces once its mesh files are split "
-                f"into their objects, over {MAX_PIECES}"
+                f"{at(source, (key, 'pieces'), lines)}: {key}: {len(pieces)} pieces once its "
+                f"mesh files are split into their objects, over {MAX_PIECES}"
             )
         parts[key] = part.model_copy(update={"pieces": pieces})
     env, manip = (len(parts[key].pieces) for key in ("environment", "manipuland"))
@@ -291,9 +302,7 @@ def describe_error(
     errors = exc.errors()
     first = errors[0]
     loc: Location = tuple(first["loc"])
-    line = line_of(loc, lines)
-    where = f"{source}:{line}" if line is not None else source
-    key = _dotted(loc)
+    where, key = at(source, loc, lines), _dotted(loc)
     if first["type"] == "extra_forbidden":
         allowed = _allowed_keys(loc[:-1], root)
         message = f"unknown key {loc[-1]!r}" + (
@@ -303,6 +312,13 @@ def describe_error(
         message = first["msg"].removeprefix("Value error, ")
     more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
     return f"{where}: {key}: {message}{more}" if key else f"{where}: {message}{more}"
+
+
+def at(source: str, location: Location, lines: dict[Location, int]) -> str:
+    """``source:line`` of the key at ``location``, or ``source`` where no line is known (a
+    task given as a mapping)."""
+    line = line_of(location, lines)
+    return f"{source}:{line}" if line is not None else source
 
 
 def _dotted(loc: Location) -> str:
