@@ -50,4 +50,12 @@ def belief_graph(
             return graph, graph.schedule()
         except NoScheduleError as exc:
             reasons.append(str(exc))
-    raise NoScheduleError(f"no particle's C-obs slice gives a contact schedule: {reasons[0]}")
+    # A part held turned against its hole (a fixture rotated in environment_pose, the hand
+    # not) leaves no goal on the slice: say how the first particle's part is turned.
+    rpy = np.rad2deg(pin.rpy.matrixToRpy(poses[0].rotation)) + 0.0  # no -0.0
+    turned = ", ".join(f"{v:.1f}" for v in rpy)
+    raise NoScheduleError(
+        f"no particle's C-obs slice gives a contact schedule: {reasons[0]}; the first "
+        f"particle's part is turned rpy [{turned}] deg in the environment's frame (robot_start "
+        "and grasp against environment_pose)"
+    )
