@@ -25,6 +25,10 @@ class NoScheduleError(BilbaError):
 class UnreachableError(BilbaError):
     """A gripper setpoint has no inverse-kinematics solution within the joint limits."""
 
+    def __init__(self, message: str, residual: float = float("nan")) -> None:
+        super().__init__(message)
+        self.residual = residual  # the norm of the 6-D pose error IK stopped at [m, rad]
+
 
 def first_line(exc: BaseException, default: str = "") -> str:
     """The first non-blank line of ``exc``'s text (``default`` when it has none): what a

@@ -556,3 +556,49 @@ def test_a_part_held_turned_against_its_hole_says_how_it_is_turned(tmp_path):
         "the first particle's part is turned rpy [0.0, 0.0, -30.0] deg in the environment's "
         "frame (robot_start and grasp against environment_pose)"
     )
+
+
+def _sideways(hand_xyz: list[float]) -> dict:
+    """The peg's hole in an upright panel facing the robot (its opening 85 cm out, 45 cm
+    up), the peg held pointing forward: a horizontal insertion, gravity across it."""
+    import yaml
+
+    from bilba_dist.task.loader import builtin_tasks
+
+    data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+    data["environment_pose"] = {"xyz": [0.91, 0, 0.45], "rpy": [0, "-90deg", 0]}
+    data["robot_start"] = {"gripper": {"xyz": hand_xyz, "rpy": [0, "90deg", 0]}}
+    return data
+
+
+def test_a_sideways_insertion_plans_from_a_start_the_centre_posture_cannot_reach():
+    """The hand pointing forward with its wrist near a joint limit: IK from the centre
+    posture stalls there, so the start is found from seeded postures (start_joints), and
+    the peg goes into the upright panel with the defaults."""
+    from bilba_dist.belief.start import start_joints
+    from bilba_dist.errors import UnreachableError
+    from bilba_dist.robot.panda import Q_CENTRE, PandaModel
+
+    task = load_task(_sideways([0.55, 0, 0.45]))
+    model = PandaModel()
+    with pytest.raises(UnreachableError):
+        model.ik(task.X_WG0, Q_CENTRE)
+    q = start_joints(task, model)
+    assert np.allclose(model.fk(q).homogeneous, task.X_WG0.homogeneous, atol=1e-4)
+    worker = RolloutWorker(task, "panda")
+    result = plan(task, worker, "bilba-variable", seed=0, timeout_s=120)
+    worker.close()
+    assert result.success, result.reason
+    assert result.verification is not None and result.verification.passed
+
+
+def test_a_start_out_of_reach_is_one_line_naming_robot_start(tmp_path):
+    import yaml
+
+    (path := tmp_path / "near.yaml").write_text(yaml.safe_dump(_sideways([0.39, 0, 0.35])))
+    register()
+    result = CliRunner().invoke(cli, ["plan", str(path), "--workers", "0", "--no-log"])
+    assert result.exit_code == 2, result.output
+    (line,) = result.stderr.splitlines()
+    assert f"{path}: robot_start: no IK solution puts the Panda's hand at [0.39, 0, 0.35] m" in line
+    assert "from 17 starting postures" in line and "give robot_start.joints near it" in line

@@ -6,7 +6,7 @@ import numpy as np
 
 from bilba_dist.belief.particles import Particle
 from bilba_dist.belief.state import Belief
-from bilba_dist.errors import TaskError
+from bilba_dist.errors import TaskError, UnreachableError
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import Task
@@ -16,13 +16,47 @@ from bilba_dist.task.loader import Task
 START_CONTACT_TOL_M = 1e-4
 
 
-def start_state(task: Task, particle: Particle, model: PandaModel | None = None) -> ParticleState:
-    """The particle at rest with the gripper at ``X_WG0``: joints by IK from the task's
-    ``robot_start.joints`` (or the centre posture) as the seed."""
-    model = model or PandaModel()
+#: Joint postures, drawn uniformly within the limits (seeded), that the start IK tries
+#: after the task's own seed: damped least squares from the centre posture stalls on some
+#: reachable hands (pointing sideways, turned near the wrist's limit).
+START_SEEDS = 16
+
+
+def start_joints(task: Task, model: PandaModel) -> np.ndarray:
+    """The joints that put the hand at ``X_WG0``: IK from the task's ``robot_start.joints``
+    (or the centre posture), else from each of START_SEEDS seeded postures in turn."""
     joints = task.spec.robot_start.joints
-    seed = np.array(joints) if joints is not None else Q_CENTRE
-    q = model.ik(task.X_WG0, seed)
+    first = np.array(joints) if joints is not None else Q_CENTRE
+    key = task.X_WG0.homogeneous.tobytes() + first.tobytes()
+    if key not in _START_JOINTS:  # once per process: every particle starts there
+        _START_JOINTS[key] = _start_joints(task, model, first)
+    return _START_JOINTS[key].copy()
+
+
+_START_JOINTS: dict[bytes, np.ndarray] = {}
+
+
+def _start_joints(task: Task, model: PandaModel, first: np.ndarray) -> np.ndarray:
+    rng = np.random.default_rng(0)
+    seeds = [first, *(rng.uniform(model.lower, model.upper) for _ in range(START_SEEDS))]
+    nearest = float("inf")
+    for seed in seeds:
+        try:
+            return model.ik(task.X_WG0, seed)
+        except UnreachableError as exc:
+            nearest = min(nearest, exc.residual)
+    xyz = ", ".join(f"{v:.4g}" for v in task.X_WG0.translation)
+    raise TaskError(
+        f"{task.source}: robot_start: no IK solution puts the Panda's hand at [{xyz}] m turned "
+        f"as given (from {len(seeds)} starting postures; the nearest {nearest:.2g} off, m and "
+        "rad): out of reach, or past a joint limit — a hand turned about its own axis can be "
+        "past the wrist's; move or turn the start, or give robot_start.joints near it"
+    )
+
+
+def start_state(task: Task, particle: Particle, model: PandaModel | None = None) -> ParticleState:
+    """The particle at rest with the gripper at ``X_WG0`` (joints: `start_joints`)."""
+    q = start_joints(task, model or PandaModel())
     return ParticleState(X_WM=task.X_WG0 * particle.X_GM, q=q)
 
 

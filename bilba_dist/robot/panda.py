@@ -97,5 +97,6 @@ class PandaModel:
             q = np.clip(q + settings.step * dq, self.lower, self.upper)
         raise UnreachableError(
             f"no IK solution for the gripper at {np.round(X_WG.translation, 4).tolist()} m "
-            f"(error {np.linalg.norm(error):.2g} after {settings.max_iterations} iterations)"
+            f"(error {np.linalg.norm(error):.2g} after {settings.max_iterations} iterations)",
+            float(np.linalg.norm(error)),
         )
