@@ -37,6 +37,17 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
         edited("environment_pose: {xyz: [0.5, 0, 0]}", "environment_pose: {xyz: [.inf, 0, 0]}"),
         "environment_pose.xyz",
     ),
+    "a 401-digit integer length": (
+        edited(
+            "environment_pose: {xyz: [0.5, 0, 0]}",
+            f"environment_pose: {{xyz: [1{'0' * 400}, 0, 0]}}",
+        ),
+        "environment_pose.xyz[0]: expected a length, got an integer of 401 digits",
+    ),
+    "a 401-digit integer bound": (
+        edited("grasp.pitch: 2deg", f"grasp.pitch: -1{'0' * 400}"),
+        "grasp.pitch: expected an angle, got an integer of 402 digits",
+    ),
     "infinite bound": (edited("grasp.pitch: 2deg", "grasp.pitch: .inf"), "finite"),
     "NaN bound": (edited("grasp.pitch: 2deg", "grasp.pitch: .nan"), "finite"),
     "infinite friction": (edited("friction: 0.45", "friction: .inf"), "friction"),

@@ -21,13 +21,18 @@ _QUANTITY = re.compile(r"^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*([a-z
 
 def parse_quantity(value: object, units: dict[str, float], kind: str) -> float:
     """Return ``value`` in SI units; raise ValueError naming the allowed units."""
-    if isinstance(value, bool):
-        raise ValueError(f"expected a {kind}, got {value!r}")
-    if isinstance(value, int | float):
-        return float(value)
-    if not isinstance(value, str):
-        raise ValueError(f"expected a {kind} (number or string with unit), got {value!r}")
     article = "an" if kind[0] in "aeiou" else "a"
+    if isinstance(value, bool):
+        raise ValueError(f"expected {article} {kind}, got {value!r}")
+    if isinstance(value, int | float):
+        try:
+            return float(value)
+        except OverflowError:  # YAML reads 1000…0 (400 digits) as an int
+            raise ValueError(
+                f"expected {article} {kind}, got an integer of {len(str(value))} digits"
+            ) from None
+    if not isinstance(value, str):
+        raise ValueError(f"expected {article} {kind} (number or string with unit), got {value!r}")
     match = _QUANTITY.match(value)
     if match is None:
         example = f"2{next(iter(units))}"
