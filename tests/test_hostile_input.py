@@ -165,11 +165,35 @@ def test_a_hostile_uncertainty_option_is_one_line(option, tmp_path):
     assert not (tmp_path / "p.json").exists()
 
 
-@pytest.mark.parametrize("args", [["--timeout", "nan"], ["--timeout", "-1"], ["--seed", "-1"]])
+BIG = "1" + "0" * 400  # past a float's range: math.isfinite(int(BIG)) overflows
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--timeout", "nan"],
+        ["--timeout", "-1"],
+        ["--seed", "-1"],
+        ["--seed", BIG],
+        ["--timeout", BIG],
+        ["--workers", BIG],
+    ],
+)
 def test_hostile_numbers_on_the_command_line_are_refused(args, tmp_path):
     result = run_cli("plan", "peg-in-hole", *args, "--out", str(tmp_path / "p.json"))
-    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert "is not within" in result.stderr and not (tmp_path / "p.json").exists()
+    assert len(result.stderr) < 300  # a 400-digit number is quoted by its length
+
+
+@pytest.mark.parametrize("workers", [BIG, "-1", "2000"])
+def test_a_batch_refuses_a_hostile_worker_count(workers, tmp_path):
+    jobs = tmp_path / "jobs.yaml"
+    jobs.write_text("name: g\ntasks: [peg-in-hole]\nseeds: 1\ntimeout_s: 1\n")
+    result = run_cli("batch", str(jobs), "--workers", workers, "--out", str(tmp_path / "out"))
+    assert result.exit_code == 2 and "Traceback" not in result.output, result.output
+    assert "'--workers'" in result.stderr and "is not within [0, 1024]" in result.stderr
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.fixture(scope="module")

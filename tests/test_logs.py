@@ -374,6 +374,10 @@ def test_logs_show_prints_one_transition_and_rejects_a_missing_step(planned):
     assert result.output.count("(floor/+z, peg/-z)") >= 4  # sought, and all 3 particles
     missing = run("logs", "show", str(log), "--step", str(len(transitions)))
     assert missing.exit_code == 2 and f"0..{len(transitions) - 1}" in missing.stderr
+    far = run("logs", "show", str(log), "--step", "-" + "9" * 400)
+    assert (
+        far.exit_code == 2 and "no step -99999" in far.stderr and "(401 characters)" in far.stderr
+    )
 
 
 def test_logs_plot_writes_a_png(planned, tmp_path):

@@ -6,6 +6,7 @@ from pathlib import Path
 import click
 
 from bilba_dist.cli.errors import EXIT_INTERRUPTED, user_errors
+from bilba_dist.cli.options import Bounded
 from bilba_dist.errors import BilbaError
 
 
@@ -19,7 +20,7 @@ from bilba_dist.errors import BilbaError
 @click.option("--resume", is_flag=True, help="Run only the jobs DIR has no record of.")
 @click.option(
     "--workers",
-    type=int,
+    type=Bounded(0, 1024, int),
     default=2,
     show_default=True,
     help="CPUs of the local Ray instance (jobs run side by side, one CPU each).",

@@ -4,6 +4,8 @@ import math
 
 import click
 
+from bilba_dist.files import clip_name
+
 
 class Bounded(click.ParamType):
     """A finite number within [low, high] (click's FloatRange lets NaN through)."""
@@ -13,13 +15,16 @@ class Bounded(click.ParamType):
         self.name = f"{kind.__name__} in [{low:g}, {high:g}]{unit}"
 
     def convert(self, value, param, ctx):
+        shown = clip_name(value, 30)  # a 400-digit seed is quoted by its length
         try:
             number = self.kind(value)
         except (TypeError, ValueError):
-            self.fail(f"{value!r} is not a number", param, ctx)
-        if not math.isfinite(number) or not self.low <= number <= self.high:
+            self.fail(f"{shown!r} is not a number", param, ctx)
+        # an int is finite (math.isfinite overflows on one past a float's range)
+        finite = isinstance(number, int) or math.isfinite(number)
+        if not finite or not self.low <= number <= self.high:
             self.fail(
-                f"{value} is not within [{self.low:g}, {self.high:.10g}]{self.unit}", param, ctx
+                f"{shown} is not within [{self.low:g}, {self.high:.10g}]{self.unit}", param, ctx
             )
         return number
 

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from bilba_dist.errors import BilbaError, listed
+from bilba_dist.files import clip_name
 from bilba_dist.record.reader import Log
 
 
@@ -37,8 +38,9 @@ def transition(log: Log, step: int) -> dict[str, Any]:
     if not transitions:
         raise BilbaError(f"{log.path}: the log holds no transitions")
     if not -len(transitions) <= step < len(transitions):
+        last = len(transitions) - 1
         raise BilbaError(
-            f"{log.path}: no step {step}; the log holds steps 0..{len(transitions) - 1}"
+            f"{log.path}: no step {clip_name(step, 30)}; the log holds steps 0..{last}"
         )
     return transitions[step]
 
