@@ -602,3 +602,6 @@ def test_a_start_out_of_reach_is_one_line_naming_robot_start(tmp_path):
     (line,) = result.stderr.splitlines()
     assert f"{path}: robot_start: no IK solution puts the Panda's hand at [0.39, 0, 0.35] m" in line
     assert "from 17 starting postures" in line and "give robot_start.joints near it" in line
+    graph = CliRunner().invoke(cli, ["graph", str(path)])  # the geometry, and a warning
+    assert graph.exit_code == 0 and "schedule: free -> " in graph.stdout, graph.output
+    assert graph.stderr.startswith(f"bilba: warning: {path}: robot_start: no IK solution")

@@ -5,11 +5,14 @@ from pathlib import Path
 import click
 
 from bilba_dist.belief.particles import initial_belief
+from bilba_dist.belief.start import start_joints
 from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
 from bilba_dist.cli.outputs import refuse_overwriting, task_file, write_output
+from bilba_dist.errors import TaskError
 from bilba_dist.geometry.contact import FREE
 from bilba_dist.modes.schedule import SliceCache, belief_graph
+from bilba_dist.robot.panda import PandaModel
 from bilba_dist.task.loader import load_task
 
 
@@ -38,6 +41,10 @@ def graph(task: str, uncertainty: tuple[str, ...], dot: Path | None) -> None:
         if u == FREE:
             click.echo(f"  {u} -> {v}  cost {cost:.6f}")
     click.echo("schedule: " + " -> ".join(str(m) for m in schedule))
+    try:  # the geometry is fine, but the robot must also start where the task says
+        start_joints(loaded, PandaModel())
+    except TaskError as exc:
+        click.echo(f"bilba: warning: {exc} (bilba plan refuses this start)", err=True)
     if dot is not None:
         write_output(dot, mode_graph.to_dot())
         click.echo(f"wrote {dot}")
