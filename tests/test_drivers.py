@@ -31,9 +31,11 @@ from bilba_dist.robot.drivers import (
     fit,
     fit_hand,
     hand_to_ee,
+    joint_limit_warnings,
     to_ee,
     to_hand,
 )
+from bilba_dist.robot.panda import JOINT_LIMITS
 from bilba_dist.task.prismatic import peg_in_hole_task, regular_polygon
 from tests.test_task_files import run_cli
 
@@ -231,6 +233,31 @@ def test_exported_scripts_use_only_what_the_driver_has(default_plan_file, target
     assert checked.returncode == 0, checked.stderr[-3000:]
 
 
+def test_postures_past_an_fr3s_joint_limits_are_named_for_the_drivers_that_drive_one():
+    """Planned on the Panda's model, a start at joint 5 = 2.83 rad (a sideways hand) or a
+    setpoint at joint 6 = 0.3 rad is inside the Panda's limits and past the FR3's."""
+    panda_low, panda_high = JOINT_LIMITS["Panda"]
+    start = np.array([0.0, -0.3, 0.0, -2.2, 2.83, 2.0, 0.78])
+    setpoints = [start.copy(), np.array([0.0, -0.3, 0.0, -2.2, 0.0, 0.3, 0.78])]
+    for q in (start, *setpoints):
+        assert all(lo <= v <= hi for lo, v, hi in zip(panda_low, q, panda_high, strict=True))
+    for name in ("franky", "libfranka", "franka-ros"):
+        joint5, joint6 = joint_limit_warnings(DRIVERS[name], start, setpoints)
+        assert joint5.startswith(
+            "on a Franka Research 3, joint 5 is past its limits [-2.8065, 2.8065] rad at the "
+            "start (2.8300 rad) and 1 of 2 motions' joint setpoints (to 2.8300)"
+        )
+        assert joint6.startswith("on a Franka Research 3, joint 6 is past its limits [0.5445, ")
+        assert "at 1 of 2 motions' joint setpoints (to 0.3000)" in joint6
+    assert joint_limit_warnings(DRIVERS["panda-py"], start, setpoints) == []
+
+
+@pytest.mark.parametrize("target", DRIVER_NAMES)
+def test_the_default_plan_is_within_every_drivers_joint_limits(default_plan_file, target):
+    result = run_cli("export", str(default_plan_file), "--target", target)
+    assert result.exit_code == 0 and "past its limits" not in result.output, result.output
+
+
 def test_franka_ros_parameters_are_its_scalars_within_limits(default_plan_file, tmp_path):
     out = tmp_path / "ros.yaml"
     result = run_cli("export", str(default_plan_file), "--target", "franka-ros", "--out", str(out))
@@ -345,3 +372,14 @@ def test_a_plan_from_before_a_new_setting_still_reads(default_plan_file, tmp_pat
     older.write_text(json.dumps(document))
     result = run_cli("execute", str(older))
     assert result.exit_code == 0, result.output
+
+
+def test_the_ik_keeps_to_the_pandas_specified_joint_limits_not_the_urdfs():
+    """pybullet_data's Panda URDF allows joint 5 to ±2.9671 rad; the robot stops at ±2.8973.
+    The IK clips to the model's limits, so those must be the specified ones."""
+    from bilba_dist.robot.panda import PandaModel
+
+    model = PandaModel()
+    low, high = JOINT_LIMITS["Panda"]
+    assert model.model.upperPositionLimit[4] > high[4]  # the URDF's is wider
+    assert model.lower.tolist() == list(low) and model.upper.tolist() == list(high)

@@ -22,7 +22,14 @@ import pinocchio as pin
 
 from bilba_dist.errors import BilbaError
 from bilba_dist.plans.file import PlanFile
-from bilba_dist.robot.drivers import R_FLANGE_HAND, Driver, Fit, fit_hand, hand_to_ee
+from bilba_dist.robot.drivers import (
+    R_FLANGE_HAND,
+    Driver,
+    Fit,
+    fit_hand,
+    hand_to_ee,
+    joint_limit_warnings,
+)
 
 
 @dataclass(frozen=True)
@@ -65,6 +72,7 @@ def driver_motions(plan: PlanFile, driver: Driver, offset: np.ndarray) -> Export
             "franka-ros's example controller filters the equilibrium pose (first order, "
             "~0.2 s); ramp the pose you publish at the plan's rates, given in the parameter file"
         )
+    warnings += joint_limit_warnings(driver, plan.start_joints, [m.q_d for m in plan.motions])
     planned_for = (plan.document.get("robot") or {}).get("driver")
     if planned_for not in (None, driver.name):
         warnings.append(f"the plan was made for {planned_for}, exported for {driver.name}")

@@ -29,6 +29,7 @@ from typing import Literal
 import numpy as np
 import pinocchio as pin
 
+from bilba_dist.robot.panda import JOINT_LIMITS
 from bilba_dist.rollout import damping
 
 DriverName = Literal["franky", "panda-py", "libfranka", "franka-ros"]
@@ -54,7 +55,10 @@ class Driver:
     rotational: tuple[float, float]  # [N·m/rad]
     damping: str
     wrench_clip: bool  # can the driver bound the spring's wrench as the planner did
+    arms: tuple["ArmName", ...]  # the arms its usual build drives (joint limits to check)
 
+
+ArmName = Literal["Panda", "Franka Research 3"]
 
 INF = float("inf")
 #: A projection or clamp changing K by less than this (relative) is not reported: a plan
@@ -70,6 +74,7 @@ DRIVERS: dict[str, Driver] = {
         (0.0, INF),
         "passed explicitly as 2·sqrtm(K)",
         True,
+        ("Franka Research 3",),
     ),
     "panda-py": Driver(
         "panda-py",
@@ -81,6 +86,7 @@ DRIVERS: dict[str, Driver] = {
         (0.0, INF),
         "computed by the driver (damping ratio 1, element-wise square root)",
         False,
+        ("Panda",),
     ),
     "libfranka": Driver(
         "libfranka",
@@ -91,6 +97,7 @@ DRIVERS: dict[str, Driver] = {
         (1.0, 300.0),
         "computed by the robot (critical, per axis of the stiffness frame)",
         False,
+        ("Franka Research 3",),
     ),
     "franka-ros": Driver(
         "franka-ros",
@@ -101,8 +108,37 @@ DRIVERS: dict[str, Driver] = {
         (0.0, 30.0),
         "computed by the controller as 2·sqrt(k)",
         False,
+        ("Panda", "Franka Research 3"),
     ),
 }
+
+
+def joint_limit_warnings(
+    driver: Driver, start: np.ndarray | None, setpoints: list[np.ndarray]
+) -> list[str]:
+    """One warning per arm ``driver`` drives and joint whose limits the plan's start or its
+    motions' joint setpoints pass: planned on the Panda's model, a plan can sit past an FR3's
+    (joint 5: ±2.8065 rad against the Panda's ±2.8973)."""
+    warnings = []
+    for arm in driver.arms:
+        low, high = JOINT_LIMITS[arm]
+        for k in range(7):
+            past = [q[k] for q in setpoints if not low[k] <= q[k] <= high[k]]
+            at_start = start is not None and not low[k] <= start[k] <= high[k]
+            if not past and not at_start:
+                continue
+            where = [f"the start ({start[k]:.4f} rad)"] if at_start and start is not None else []
+            if past:
+                worst = max(past, key=lambda v: max(low[k] - v, v - high[k]))
+                where.append(
+                    f"{len(past)} of {len(setpoints)} motions' joint setpoints (to {worst:.4f})"
+                )
+            warnings.append(
+                f"on a {arm}, joint {k + 1} is past its limits [{low[k]:g}, {high[k]:g}] rad at "
+                f"{' and '.join(where)}: the robot refuses the plan there; plan again with the "
+                "start turned away from that limit (robot_start)"
+            )
+    return warnings
 
 
 def ee_offset(R_WG: np.ndarray, offset_m: np.ndarray) -> np.ndarray:

@@ -22,6 +22,21 @@ TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
 #: A comfortable mid-range posture: the IK's joint-centring target.
 Q_CENTRE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 
+#: Joint position limits [rad] from Franka's robot specifications. The Panda URDF we load
+#: (pybullet_data's) allows more (joint 5 ±2.9671 against the robot's ±2.8973), so the IK
+#: keeps to these: a plan must run on the real arm. The Franka Research 3's are narrower at
+#: joints 1, 5, 6 (from 0.5445) and joint 4's top; export checks a plan against them.
+JOINT_LIMITS: dict[str, tuple[tuple[float, ...], tuple[float, ...]]] = {
+    "Panda": (
+        (-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973),
+        (2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973),
+    ),
+    "Franka Research 3": (
+        (-2.7437, -1.7837, -2.9007, -3.0421, -2.8065, 0.5445, -3.0159),
+        (2.7437, 1.7837, 2.9007, -0.1518, 2.8065, 4.5169, 3.0159),
+    ),
+}
+
 
 def panda_urdf() -> str:
     return os.path.join(pybullet_data.getDataPath(), "franka_panda", "panda.urdf")
@@ -54,8 +69,9 @@ class PandaModel:
             X_GM = X_GM if X_GM is not None else pin.SE3.Identity()
             self._add_payload(payload_mass, X_GM, np.zeros(3) if com_M is None else com_M)
         self.data = self.model.createData()
-        self.lower = self.model.lowerPositionLimit.copy()
-        self.upper = self.model.upperPositionLimit.copy()
+        low, high = (np.array(v) for v in JOINT_LIMITS["Panda"])
+        self.lower = np.maximum(self.model.lowerPositionLimit, low)
+        self.upper = np.minimum(self.model.upperPositionLimit, high)
 
     def _add_payload(self, mass: float, X_GM: pin.SE3, com_M: np.ndarray) -> None:
         frame = self.model.frames[self.hand]
