@@ -383,3 +383,24 @@ def test_the_ik_keeps_to_the_pandas_specified_joint_limits_not_the_urdfs():
     low, high = JOINT_LIMITS["Panda"]
     assert model.model.upperPositionLimit[4] > high[4]  # the URDF's is wider
     assert model.lower.tolist() == list(low) and model.upper.tolist() == list(high)
+
+
+def test_a_plan_for_an_fr3_driver_keeps_to_the_fr3s_joint_limits():
+    """planner.driver franky plans within the FR3's limits: the forward-pointing start that
+    a Panda reaches with joint 5 at 2.83 rad (past the FR3's 2.8065) is refused for it, in
+    one line naming the arm; for panda-py it is found."""
+    from bilba_dist.belief.start import start_joints
+    from bilba_dist.errors import TaskError
+    from bilba_dist.robot.panda import PandaModel
+    from bilba_dist.task.loader import load_task, with_planner
+    from tests.test_planner import _sideways
+
+    both = PandaModel(arms=("Panda", "Franka Research 3"))
+    assert both.upper[4] == 2.8065 and both.lower[5] == 0.5445 and both.upper[5] == 3.7525
+    task = load_task(_sideways([0.55, 0, 0.45]))
+    q = start_joints(with_planner(task, driver="panda-py"))
+    assert 2.8065 < abs(q[4]) <= 2.8973
+    with pytest.raises(
+        TaskError, match=r"within the Franka Research 3's \(planner.driver franky\) joint limits"
+    ):
+        start_joints(with_planner(task, driver="franky"))

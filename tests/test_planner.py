@@ -583,7 +583,7 @@ def test_a_sideways_insertion_plans_from_a_start_the_centre_posture_cannot_reach
     model = PandaModel()
     with pytest.raises(UnreachableError):
         model.ik(task.X_WG0, Q_CENTRE)
-    q = start_joints(task, model)
+    q = start_joints(task)
     assert np.allclose(model.fk(q).homogeneous, task.X_WG0.homogeneous, atol=1e-4)
     worker = RolloutWorker(task, "panda")
     result = plan(task, worker, "bilba-variable", seed=0, timeout_s=120)
@@ -600,7 +600,11 @@ def test_a_start_out_of_reach_is_one_line_naming_robot_start(tmp_path):
     result = CliRunner().invoke(cli, ["plan", str(path), "--workers", "0", "--no-log"])
     assert result.exit_code == 2, result.output
     (line,) = result.stderr.splitlines()
-    assert f"{path}: robot_start: no IK solution puts the Panda's hand at [0.39, 0, 0.35] m" in line
+    assert (
+        f"{path}: robot_start: no IK solution within the Panda's joint limits puts the hand "
+        in line
+    )
+    assert "at [0.39, 0, 0.35] m turned as given" in line
     assert "from 17 starting postures" in line and "give robot_start.joints near it" in line
     graph = CliRunner().invoke(cli, ["graph", str(path)])  # the geometry, and a warning
     assert graph.exit_code == 0 and "schedule: free -> " in graph.stdout, graph.output

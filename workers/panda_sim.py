@@ -16,6 +16,7 @@ import pinocchio as pin
 import pybullet as p
 
 from bilba_dist.errors import UnreachableError
+from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
@@ -93,7 +94,8 @@ class PandaSim(OwnsClient):
             physicsClientId=self.client,
         )
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
-        self.model = PandaModel(mass, X_GM, task.manipuland.centre())
+        arms = planning_arms(task.spec.planner.driver)
+        self.model = PandaModel(mass, X_GM, task.manipuland.centre(), arms)
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
         info = p.getDynamicsInfo(self.robot, self.part_link, physicsClientId=self.client)

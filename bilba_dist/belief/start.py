@@ -7,6 +7,7 @@ import numpy as np
 from bilba_dist.belief.particles import Particle
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import TaskError, UnreachableError
+from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import Task
@@ -22,14 +23,16 @@ START_CONTACT_TOL_M = 1e-4
 START_SEEDS = 16
 
 
-def start_joints(task: Task, model: PandaModel) -> np.ndarray:
-    """The joints that put the hand at ``X_WG0``: IK from the task's ``robot_start.joints``
-    (or the centre posture), else from each of START_SEEDS seeded postures in turn."""
+def start_joints(task: Task) -> np.ndarray:
+    """The joints that put the hand at ``X_WG0``, within the joint limits of the arm the
+    task's driver drives: IK from the task's ``robot_start.joints`` (or the centre posture),
+    else from each of START_SEEDS seeded postures in turn."""
     joints = task.spec.robot_start.joints
     first = np.array(joints) if joints is not None else Q_CENTRE
-    key = task.X_WG0.homogeneous.tobytes() + first.tobytes()
+    arms = planning_arms(task.spec.planner.driver)
+    key = task.X_WG0.homogeneous.tobytes() + first.tobytes() + repr(arms).encode()
     if key not in _START_JOINTS:  # once per process: every particle starts there
-        _START_JOINTS[key] = _start_joints(task, model, first)
+        _START_JOINTS[key] = _start_joints(task, PandaModel(arms=arms), first)
     return _START_JOINTS[key].copy()
 
 
@@ -46,26 +49,28 @@ def _start_joints(task: Task, model: PandaModel, first: np.ndarray) -> np.ndarra
         except UnreachableError as exc:
             nearest = min(nearest, exc.residual)
     xyz = ", ".join(f"{v:.4g}" for v in task.X_WG0.translation)
+    driver = task.spec.planner.driver
+    arm = " and ".join(f"{a}'s" for a in planning_arms(driver))
+    arm += f" (planner.driver {driver})" if driver != "none" else ""
     raise TaskError(
-        f"{task.source}: robot_start: no IK solution puts the Panda's hand at [{xyz}] m turned "
-        f"as given (from {len(seeds)} starting postures; the nearest {nearest:.2g} off, m and "
-        "rad): out of reach, or past a joint limit — a hand turned about its own axis can be "
-        "past the wrist's; move or turn the start, or give robot_start.joints near it"
+        f"{task.source}: robot_start: no IK solution within the {arm} joint limits puts the "
+        f"hand at [{xyz}] m turned as given (from {len(seeds)} starting postures; the nearest "
+        f"{nearest:.2g} off, m and rad): out of reach, or past a joint limit — a hand turned "
+        "about its own axis can be past the wrist's; move or turn the start, or give "
+        "robot_start.joints near it"
     )
 
 
-def start_state(task: Task, particle: Particle, model: PandaModel | None = None) -> ParticleState:
+def start_state(task: Task, particle: Particle) -> ParticleState:
     """The particle at rest with the gripper at ``X_WG0`` (joints: `start_joints`)."""
-    q = start_joints(task, model or PandaModel())
-    return ParticleState(X_WM=task.X_WG0 * particle.X_GM, q=q)
+    return ParticleState(X_WM=task.X_WG0 * particle.X_GM, q=start_joints(task))
 
 
 def start_belief(task: Task, particles: Sequence[Particle]) -> Belief:
     """Every particle at rest at the start pose, free of contact."""
-    model = PandaModel()
     return Belief(
         tuple(particles),
-        tuple(start_state(task, p, model) for p in particles),
+        tuple(start_state(task, p) for p in particles),
         tuple(frozenset() for _ in particles),
     )
 

@@ -12,7 +12,6 @@ from bilba_dist.cli.outputs import refuse_overwriting, task_file, write_output
 from bilba_dist.errors import TaskError
 from bilba_dist.geometry.contact import FREE
 from bilba_dist.modes.schedule import SliceCache, belief_graph
-from bilba_dist.robot.panda import PandaModel
 from bilba_dist.task.loader import load_task
 
 
@@ -42,7 +41,7 @@ def graph(task: str, uncertainty: tuple[str, ...], dot: Path | None) -> None:
             click.echo(f"  {u} -> {v}  cost {cost:.6f}")
     click.echo("schedule: " + " -> ".join(str(m) for m in schedule))
     try:  # the geometry is fine, but the robot must also start where the task says
-        start_joints(loaded, PandaModel())
+        start_joints(loaded)
     except TaskError as exc:
         click.echo(f"bilba: warning: {exc} (bilba plan refuses this start)", err=True)
     if dot is not None:

@@ -28,7 +28,6 @@ from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.robot.drivers import DRIVER_NAMES
-from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
 from bilba_dist.task.schema import PRESETS
@@ -132,7 +131,7 @@ def plan_command(
         loaded = with_preset(loaded, preset)
     if driver is not None:
         loaded = with_planner(loaded, driver=driver)
-    start_joints(loaded, PandaModel())  # a start out of reach: one line before planning
+    start_joints(loaded)  # a start out of reach: one line before planning
     if not allow_start_contact:
         check_start_free(loaded, initial_belief(loaded))
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"

@@ -29,6 +29,7 @@ from bilba_dist.planning.make_contact import Step, planned_motions
 from bilba_dist.planning.recorder import NullRecorder, Recorder
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.planning.stiffness import driver_fit
+from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutRequest
 from bilba_dist.task.loader import Task
@@ -185,5 +186,7 @@ def _finish(
             True,
         )
     result.success, result.reason = True, ""
-    result.motions = planned_motions(steps, nodes[0].belief, PandaModel())
+    result.motions = planned_motions(
+        steps, nodes[0].belief, PandaModel(arms=planning_arms(task.spec.planner.driver))
+    )
     result.final_belief = nodes[leaf].belief

@@ -45,6 +45,7 @@ from bilba_dist.planning.verify import (
     with_more_checks,
     within_budget,
 )
+from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend, require_world
 from bilba_dist.task.loader import Task
@@ -90,7 +91,7 @@ def plan(
     rng = np.random.default_rng(seed)
     params = task.spec.planner
     particles = initial_belief(task)
-    panda = PandaModel()
+    panda = PandaModel(arms=planning_arms(task.spec.planner.driver))
     b0 = start_belief(task, planning_particles(task, particles))
     b0 = b0.with_check(check_belief(task, particles))
     result = PlanResult(False, "", [], variant, seed)

@@ -113,6 +113,12 @@ DRIVERS: dict[str, Driver] = {
 }
 
 
+def planning_arms(driver: str) -> tuple[str, ...]:
+    """The arms whose joint limits a plan for ``driver`` (a task's ``planner.driver``) keeps
+    to: every arm that driver drives (franka-ros: both), the Panda's when none is named."""
+    return DRIVERS[driver].arms if driver in DRIVERS else ("Panda",)
+
+
 def joint_limit_warnings(
     driver: Driver, start: np.ndarray | None, setpoints: list[np.ndarray]
 ) -> list[str]:

@@ -60,7 +60,9 @@ class PandaModel:
         payload_mass: float = 0.0,
         X_GM: pin.SE3 | None = None,
         com_M: np.ndarray | None = None,
+        arms: tuple[str, ...] = ("Panda",),
     ) -> None:
+        """``arms``: the IK keeps within the joint limits of every one (JOINT_LIMITS)."""
         full = pin.buildModelFromUrdf(panda_urdf())
         locked = [full.getJointId(name) for name in FINGER_JOINTS]
         self.model = pin.buildReducedModel(full, locked, pin.neutral(full))
@@ -69,9 +71,11 @@ class PandaModel:
             X_GM = X_GM if X_GM is not None else pin.SE3.Identity()
             self._add_payload(payload_mass, X_GM, np.zeros(3) if com_M is None else com_M)
         self.data = self.model.createData()
-        low, high = (np.array(v) for v in JOINT_LIMITS["Panda"])
-        self.lower = np.maximum(self.model.lowerPositionLimit, low)
-        self.upper = np.minimum(self.model.upperPositionLimit, high)
+        self.lower = self.model.lowerPositionLimit.copy()
+        self.upper = self.model.upperPositionLimit.copy()
+        for arm in arms:
+            low, high = JOINT_LIMITS[arm]
+            self.lower, self.upper = np.maximum(self.lower, low), np.minimum(self.upper, high)
 
     def _add_payload(self, mass: float, X_GM: pin.SE3, com_M: np.ndarray) -> None:
         frame = self.model.frames[self.hand]
