@@ -404,3 +404,23 @@ def test_a_plan_for_an_fr3_driver_keeps_to_the_fr3s_joint_limits():
         TaskError, match=r"within the Franka Research 3's \(planner.driver franky\) joint limits"
     ):
         start_joints(with_planner(task, driver="franky"))
+
+
+@pytest.mark.parametrize("driver", ["none", "franky"])
+def test_the_simulated_arm_stops_where_the_ik_does(driver):
+    """The PyBullet arm's joint limits are the planning model's (the Panda's specified ones,
+    or the FR3's within the URDF for franky), not pybullet_data's wider URDF limits."""
+    import pybullet as p
+
+    from bilba_dist.belief.particles import initial_belief
+    from bilba_dist.task.loader import load_task, with_planner
+    from bilba_dist.workers.rollout_worker import RolloutWorker
+
+    task = with_planner(load_task("peg-in-hole"), driver=driver)
+    worker = RolloutWorker(task)
+    sim = worker.panda_sim(initial_belief(task)[0].X_GM)
+    info = [p.getJointInfo(sim.robot, j, physicsClientId=sim.client) for j in sim.joints]
+    worker.close()
+    assert [i[8] for i in info] == pytest.approx(sim.model.lower.tolist(), abs=1e-12)
+    assert [i[9] for i in info] == pytest.approx(sim.model.upper.tolist(), abs=1e-12)
+    assert sim.model.upper[4] == (2.8973 if driver == "none" else 2.8065)

@@ -69,7 +69,8 @@ class PandaSim(OwnsClient):
         self.task, self.X_GM, self.settings = task, X_GM, settings
         self.client = connect(settings.timestep_s, -9.81, settings.gui)
         mass = task.spec.manipuland.mass
-        urdf = panda_with_part(task.manipuland, X_GM, mass)
+        arms = planning_arms(task.spec.planner.driver)
+        urdf = panda_with_part(task.manipuland, X_GM, mass, arms=arms)
         self.robot = p.loadURDF(
             str(urdf),
             useFixedBase=True,
@@ -94,7 +95,6 @@ class PandaSim(OwnsClient):
             physicsClientId=self.client,
         )
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
-        arms = planning_arms(task.spec.planner.driver)
         self.model = PandaModel(mass, X_GM, task.manipuland.centre(), arms)
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()

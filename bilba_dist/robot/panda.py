@@ -52,6 +52,14 @@ class IKSettings:
     step: float = 1.0
 
 
+def arm_limits(arms: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The joint limits [rad] within which every one of ``arms`` can go (JOINT_LIMITS)."""
+    low, high = np.full(7, -np.inf), np.full(7, np.inf)
+    for arm in arms:
+        low, high = np.maximum(low, JOINT_LIMITS[arm][0]), np.minimum(high, JOINT_LIMITS[arm][1])
+    return low, high
+
+
 class PandaModel:
     """Pinocchio model of the arm with the fingers locked and an optional payload."""
 
@@ -71,11 +79,9 @@ class PandaModel:
             X_GM = X_GM if X_GM is not None else pin.SE3.Identity()
             self._add_payload(payload_mass, X_GM, np.zeros(3) if com_M is None else com_M)
         self.data = self.model.createData()
-        self.lower = self.model.lowerPositionLimit.copy()
-        self.upper = self.model.upperPositionLimit.copy()
-        for arm in arms:
-            low, high = JOINT_LIMITS[arm]
-            self.lower, self.upper = np.maximum(self.lower, low), np.minimum(self.upper, high)
+        low, high = arm_limits(arms)
+        self.lower = np.maximum(self.model.lowerPositionLimit, low)
+        self.upper = np.minimum(self.model.upperPositionLimit, high)
 
     def _add_payload(self, mass: float, X_GM: pin.SE3, com_M: np.ndarray) -> None:
         frame = self.model.frames[self.hand]
