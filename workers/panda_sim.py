@@ -70,7 +70,9 @@ class PandaSim(OwnsClient):
         self.client = connect(settings.timestep_s, -9.81, settings.gui)
         mass = task.spec.manipuland.mass
         arms = planning_arms(task.spec.planner.driver)
-        urdf = panda_with_part(task.manipuland, X_GM, mass, arms=arms)
+        self.model = PandaModel(mass, X_GM, task.manipuland.centre(), arms)
+        limits = (self.model.lower, self.model.upper)  # the simulated arm stops where the IK does
+        urdf = panda_with_part(task.manipuland, X_GM, mass, limits=limits)
         self.robot = p.loadURDF(
             str(urdf),
             useFixedBase=True,
@@ -95,7 +97,6 @@ class PandaSim(OwnsClient):
             physicsClientId=self.client,
         )
         self.env = EnvironmentBodies.create(task.environment, task.spec.friction, self.client)
-        self.model = PandaModel(mass, X_GM, task.manipuland.centre(), arms)
         self.clean = p.saveState(physicsClientId=self.client)
         self.stats = SimStats()
         info = p.getDynamicsInfo(self.robot, self.part_link, physicsClientId=self.client)

@@ -30,7 +30,7 @@ from scipy.spatial import HalfspaceIntersection
 
 from bilba_dist.errors import GeometryError
 from bilba_dist.geometry.piece import ConvexPiece, Part, convex_piece
-from bilba_dist.robot.panda import ARM_JOINTS, FINGER_JOINTS, arm_limits, panda_urdf
+from bilba_dist.robot.panda import ARM_JOINTS, FINGER_JOINTS, panda_urdf
 
 PART_LINK = "manipuland"
 #: The arm's last moving link: the hand's fixed links are merged into it.
@@ -95,12 +95,13 @@ def panda_with_part(
     mass: float,
     folder: Path | None = None,
     merge_hand: bool = True,
-    arms: tuple[str, ...] = ("Panda",),
+    limits: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Path:
     """Write the URDF (and any meshes) into ``folder`` and return its path. ``merge_hand``:
-    the hand's fixed links merged into the flange link (``merge_fixed_links``). The arm's
-    joints stop at the limits of ``arms`` (pybullet_data's URDF allows more: joint 5 to
-    ±2.9671 rad where a Panda stops at ±2.8973), as the IK's do."""
+    the hand's fixed links merged into the flange link (``merge_fixed_links``). ``limits``:
+    the arm's joint limits (lower, upper) to write in place of the URDF's (pybullet_data's
+    allow more: joint 5 to ±2.9671 rad where a Panda stops at ±2.8973) — the IK's,
+    ``PandaModel.lower``/``upper``."""
     folder = Path(folder or tempfile.mkdtemp(prefix="bilba_urdf_"))
     folder.mkdir(parents=True, exist_ok=True)
     source = Path(panda_urdf())
@@ -109,15 +110,8 @@ def panda_with_part(
     text = re.sub(r'filename="(package://)?meshes/', f'filename="{source.parent}/meshes/', text)
     for joint in FINGER_JOINTS:
         text = re.sub(rf'(<joint name="{joint}" type=)"prismatic"', r'\1"fixed"', text)
-    for joint, low, high in zip(ARM_JOINTS, *arm_limits(arms), strict=True):
-
-        def narrowed(m: re.Match[str], low: float = low, high: float = high) -> str:
-            lower, upper = max(float(m[2]), low), min(float(m[3]), high)  # as PandaModel's
-            return f'{m[1]}lower="{lower:.17g}" upper="{upper:.17g}"'
-
-        pattern = rf'(<joint name="{joint}".*?<limit [^>]*?)lower="([^"]*)" upper="([^"]*)"'
-        text, n = re.subn(pattern, narrowed, text, count=1, flags=re.DOTALL)
-        assert n == 1, joint  # pybullet_data's URDF as we know it
+    if limits is not None:
+        text = _with_joint_limits(text, *limits)
     centre = part.centre()
     link = f"""
   <link name="{PART_LINK}">
@@ -135,6 +129,20 @@ def panda_with_part(
     path = folder / "panda_with_part.urdf"
     path.write_text(text)
     return path
+
+
+def _with_joint_limits(text: str, lower: np.ndarray, upper: np.ndarray) -> str:
+    """``text`` (the Panda URDF) with each arm joint's limits replaced."""
+    for joint, low, high in zip(ARM_JOINTS, lower, upper, strict=True):
+        text, n = re.subn(
+            rf'(<joint name="{joint}".*?<limit [^>]*?)lower="[^"]*" upper="[^"]*"',
+            rf'\g<1>lower="{low:.17g}" upper="{high:.17g}"',
+            text,
+            count=1,
+            flags=re.DOTALL,
+        )
+        assert n == 1, joint  # pybullet_data's URDF as we know it
+    return text
 
 
 def _pose(origin: ET.Element | None) -> pin.SE3:

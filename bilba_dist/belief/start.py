@@ -32,14 +32,15 @@ def start_joints(task: Task) -> np.ndarray:
     arms = planning_arms(task.spec.planner.driver)
     key = task.X_WG0.homogeneous.tobytes() + first.tobytes() + repr(arms).encode()
     if key not in _START_JOINTS:  # once per process: every particle starts there
-        _START_JOINTS[key] = _start_joints(task, PandaModel(arms=arms), first)
+        _START_JOINTS[key] = _start_joints(task, arms, first)
     return _START_JOINTS[key].copy()
 
 
 _START_JOINTS: dict[bytes, np.ndarray] = {}
 
 
-def _start_joints(task: Task, model: PandaModel, first: np.ndarray) -> np.ndarray:
+def _start_joints(task: Task, arms: tuple[str, ...], first: np.ndarray) -> np.ndarray:
+    model = PandaModel(arms=arms)
     rng = np.random.default_rng(0)
     seeds = [first, *(rng.uniform(model.lower, model.upper) for _ in range(START_SEEDS))]
     nearest = float("inf")
@@ -50,7 +51,7 @@ def _start_joints(task: Task, model: PandaModel, first: np.ndarray) -> np.ndarra
             nearest = min(nearest, exc.residual)
     xyz = ", ".join(f"{v:.4g}" for v in task.X_WG0.translation)
     driver = task.spec.planner.driver
-    arm = " and ".join(f"{a}'s" for a in planning_arms(driver))
+    arm = " and ".join(f"{a}'s" for a in arms)
     arm += f" (planner.driver {driver})" if driver != "none" else ""
     raise TaskError(
         f"{task.source}: robot_start: no IK solution within the {arm} joint limits puts the "
