@@ -90,7 +90,9 @@ class RolloutRequest:
 class RolloutResult:
     """The end of one rollout: the new state, the contact set ``D(q)``, the joint setpoint
     ``q_d`` the motion used (Panda model), simulated time, and whether it stopped early
-    because everything had settled."""
+    because everything had settled. Panda model: the spring's peak wrench per axis (at the
+    hand, world axes, rotation first: N·m, N) and its peak torque per joint [N·m] over the
+    rollout — in contact, the load the robot's collision detection sees."""
 
     state: ParticleState
     contacts: ContactSet
@@ -98,6 +100,8 @@ class RolloutResult:
     sim_time_s: float
     settled: bool
     reachable: bool = True
+    peak_wrench: np.ndarray | None = None
+    peak_joint_torque: np.ndarray | None = None
 
 
 class RolloutBackend(Protocol):

@@ -137,6 +137,7 @@ def robot_classes(target: str) -> dict[str, list[type]]:
 
         return {
             "panda": [panda_py.Panda],
+            "robot": [panda_py.libfranka.Robot],
             "controller": [controllers.CartesianImpedance],
             "ctx": [panda_py._core.PandaContext],
         }
@@ -194,6 +195,13 @@ def check_script(script: str, target: str, plan: str) -> None:
     document = json.loads(Path(plan).read_text())
     assert document["robot"]["start_joints"] == module.START_JOINTS
     assert len(module.MOTIONS) == len(document["motions"])
+    lower_torque, upper_torque, lower_force, upper_force = module.COLLISION
+    assert len(lower_torque) == len(upper_torque) == 7 and len(lower_force) == len(upper_force) == 6
+    assert all(
+        lo <= hi
+        for lo, hi in zip(lower_torque + lower_force, upper_torque + upper_force, strict=True)
+    )
+    assert "set_collision_behavior" in source
     built = module.build()  # the driver's own objects, made without a robot
     assert len(built) == len(document["motions"])
     main = next(n for n in ast.parse(source).body if getattr(n, "name", "") == "main")
@@ -258,6 +266,51 @@ def test_the_default_plan_is_within_every_drivers_joint_limits(default_plan_file
     assert result.exit_code == 0 and "past its limits" not in result.output, result.output
 
 
+@pytest.mark.parametrize("target", ["franky", "panda-py"])
+def test_exported_collision_thresholds_let_the_plans_own_contacts_through(
+    default_plan_file, target
+):
+    """The default plan presses the peg into its hole with 10-20 N: at franka_control's
+    usual 20 N the robot would stop on its own contact. The export replays the plan as the
+    driver runs it and raises the upper thresholds to twice the peak where that is needed;
+    `bilba execute` reports the same peaks."""
+    from bilba_dist.plans.export import driver_motions, with_thresholds
+    from bilba_dist.plans.file import read_plan
+    from bilba_dist.plans.loads import MARGIN, USUAL_TORQUE, USUAL_WRENCH
+
+    plan = read_plan(default_plan_file)
+    exported = with_thresholds(plan, driver_motions(plan, DRIVERS[target], OFFSET))
+    t = exported.thresholds
+    assert max(t.peak_wrench[:3]) > 5.0  # it does press
+    for peak, usual, upper in zip(
+        t.peak_wrench + t.peak_torque,
+        USUAL_WRENCH + USUAL_TORQUE,
+        t.upper_wrench + t.upper_torque,
+        strict=True,
+    ):
+        assert upper >= max(usual, MARGIN * peak) and upper < max(usual, MARGIN * peak) + 1
+    assert t.lower_wrench == list(USUAL_WRENCH) and t.lower_torque == list(USUAL_TORQUE)
+    assert t.raised == any("raises those upper thresholds" in w for w in exported.warnings)
+    if target == "franky":  # the planned clip: execute's peaks are the export's
+        result = run_cli("execute", str(default_plan_file), "--driver", target)
+        peaks = [float(v) for v in re.findall(r"peak load ([\d.]+) N", result.output)]
+        assert len(peaks) == len(plan.motions) and max(peaks) <= max(t.peak_wrench[:3]) + 0.05
+
+
+def test_collision_thresholds_rise_only_where_the_plan_needs_it():
+    from bilba_dist.plans.loads import Load, collision_thresholds, threshold_note
+
+    quiet = Load(np.array([3.0, 2.0, 9.9, 0.5, 0.5, 0.1]), np.full(7, 2.0))
+    pressing = Load(np.array([1.0, 0.0, 14.2, 0.5, 13.0, 0.0]), np.array([11.0, 0, 0, 0, 0, 0, 0]))
+    assert not collision_thresholds([quiet]).raised
+    t = collision_thresholds([quiet, pressing])
+    assert t.upper_wrench == [20.0, 20.0, 29.0, 25.0, 26.0, 25.0]
+    assert t.upper_torque == [22.0, 20.0, 18.0, 18.0, 16.0, 14.0, 12.0]
+    note = threshold_note(t)
+    assert "z 14.2 N, about y 13.0 N·m, joint 1 11.0 N·m" in note
+    assert note.endswith("to z 29 N, about y 26 N·m, joint 1 22 N·m")
+
+
 def test_franka_ros_parameters_are_its_scalars_within_limits(default_plan_file, tmp_path):
     out = tmp_path / "ros.yaml"
     result = run_cli("export", str(default_plan_file), "--target", "franka-ros", "--out", str(out))
@@ -268,6 +321,10 @@ def test_franka_ros_parameters_are_its_scalars_within_limits(default_plan_file, 
     for m in data["motions"]:
         assert 0 < m["translational_stiffness"] <= 400 and 0 < m["rotational_stiffness"] <= 30
         assert m["equilibrium_pose"]["frame_id"] == "panda_link0"
+    config = data["collision_config"]  # franka_control's parameter, its eight arrays
+    assert len(config) == 8 and "&" not in out.read_text()  # no YAML anchors
+    assert config["upper_force_thresholds_nominal"] == config["upper_force_thresholds_acceleration"]
+    assert all(len(v) == (7 if "torque" in k else 6) for k, v in config.items())
 
 
 # -- bilba execute ------------------------------------------------------------------------

@@ -90,6 +90,10 @@ def test_spring_wrench_is_clipped_when_pressing_deep():
         sim = worker.panda_sim(particle.X_GM)
         points = p.getContactPoints(bodyA=sim.robot, physicsClientId=sim.client)
         forces[limit] = sum(pt[9] for pt in points)
+        # the rollout's peak spring wrench (what export sets the collision thresholds from)
+        # is the force the face holds
+        assert result.peak_wrench[5] == pytest.approx(forces[limit], rel=0.1)
+        assert result.peak_joint_torque.shape == (7,) and result.peak_joint_torque.max() > 1
         worker.close()
     assert forces[20.0] == pytest.approx(20.0, abs=1.5)
     assert forces[1000.0] > 45.0
@@ -338,13 +342,16 @@ def test_compiled_control_step_matches_the_impedance_law(far):
         wrench = wrench * min(1.0, 20.0 / norm)
         expected = J.T @ wrench + K_null @ e - B_q @ x[7:] + g
         expected = np.clip(expected, -TORQUE_LIMITS, TORQUE_LIMITS)
-        tau = np.empty(7)
+        tau = np.zeros(20)
+        tau[7:] = 0.5  # peaks so far: kept where the step's own are lower
         feed = ramp @ gains.ref_gains.T
         calm = 0.1
         still = joint_torque(
             gains.state_gains, feed, 3, x, gains.Jt, 20.0, g, TORQUE_LIMITS, tau, calm
         )
-        assert np.allclose(tau, expected, rtol=1e-9, atol=1e-9)
+        assert np.allclose(tau[:7], expected, rtol=1e-9, atol=1e-9)
+        assert np.allclose(tau[7:13], np.maximum(0.5, np.abs(wrench)), rtol=1e-9)
+        assert np.allclose(tau[13:], np.maximum(0.5, np.abs(J.T @ wrench)), rtol=1e-9)
         assert still == bool(np.all(np.abs(x[7:]) < calm))
         settled += still
     assert 0 < settled < 40  # both answers of the settle test were checked

@@ -32,6 +32,11 @@ def joint_torque(
     the torque ``clip(Jᵀ w + k_n N e − B_q q̇ + g, ±tau_max)`` at ramp step ``i`` for
     ``x = [q; q̇]``, ``e = q_ref[i] − q``, ``w = K J e`` norm-clipped at ``limit``.
 
+    ``tau`` is 20 long: the torque in ``tau[:7]``; ``tau[7:13]`` and ``tau[13:20]`` keep the
+    running peaks of ``|w|`` per axis and of ``|Jᵀ w|`` per joint (the spring's wrench and
+    its joint torques: in contact, what the robot's external-force estimate reads and its
+    collision thresholds are compared with; the caller zeroes them before a rollout).
+
     ``G x + feed[i]`` gives ``[w; τ − g]`` unclipped in one 13×14 product
     (`JointImpedance`); past the limit the wrench is scaled by ``s = limit/|w|``, which
     takes ``(1 − s) Jᵀ w`` off the torque. Ten arguments, not more: Numba types each one
@@ -48,13 +53,22 @@ def joint_torque(
             w2 += acc * acc
         else:
             tau[r - 6] = acc
+    scale = 1.0
     if w2 > limit * limit:  # rare: only far from the setpoint
-        cut = 1.0 - limit / math.sqrt(w2)
+        scale = limit / math.sqrt(w2)
+        cut = 1.0 - scale
         for j in range(7):
             acc = 0.0
             for r in range(6):
                 acc += Jt[j, r] * w[r]
             tau[j] -= cut * acc
+    for r in range(6):
+        tau[7 + r] = max(tau[7 + r], abs(w[r]) * scale)
+    for j in range(7):
+        acc = 0.0
+        for r in range(6):
+            acc += Jt[j, r] * w[r]
+        tau[13 + j] = max(tau[13 + j], abs(acc) * scale)
     still = True
     for j in range(7):
         tau[j] = min(max(tau[j] + g[j], -tau_max[j]), tau_max[j])

@@ -8,7 +8,7 @@ setpoint ``q_d`` (IK of ``G_d``) is approached along a straight joint-space ramp
 import math
 import shutil
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from operator import itemgetter
 
 import numpy as np
@@ -158,11 +158,13 @@ class PandaSim(OwnsClient):
             q_d = self.model.ik(motion.G_d, start.q)
         except UnreachableError:
             return self._result(X_WO, start.q, 0.0, settled=False, reachable=False)
-        steps, settled = self._run(start.q, q_d, motion)
-        return self._result(X_WO, q_d, steps * self.settings.timestep_s, settled, True)
+        steps, settled, peaks = self._run(start.q, q_d, motion)
+        result = self._result(X_WO, q_d, steps * self.settings.timestep_s, settled, True)
+        return replace(result, peak_wrench=peaks[:6], peak_joint_torque=peaks[6:])
 
-    def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool]:
-        """Step the controller until the motion has settled or timed out.
+    def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool, np.ndarray]:
+        """Step the controller until the motion has settled or timed out. Also returns the
+        spring's peak wrench per axis and its peak torque per joint (`joint_torque`).
 
         Our per-step Python rivals the physics step, so the loop makes four calls a step —
         read the joints, gravity (Pinocchio), the compiled torque and settle test, send the
@@ -182,7 +184,8 @@ class PandaSim(OwnsClient):
         G, Jt = gains.state_gains, gains.Jt
         limit, last, tau_max = gains.limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
-        x, tau = np.empty(14), np.empty(7)  # x = [q; q̇]
+        x, tau = np.empty(14), np.zeros(20)  # x = [q; q̇]; tau: torque, then the peaks
+        out = tau[:7]
         q, position, speed, unused = x[:7], itemgetter(0), itemgetter(1), [0.0] * 7
         # Every argument passed by position (physicsClientId last, the position-control
         # fields as zeros that torque control ignores): PyBullet's keyword parsing costs
@@ -195,7 +198,7 @@ class PandaSim(OwnsClient):
                 G, feed, i, x, Jt, limit, gravity(model, data, q), tau_max, tau, calm
             )
             command(
-                robot, joints, torque_control, unused, unused, tau.tolist(), unused, unused, client
+                robot, joints, torque_control, unused, unused, out.tolist(), unused, unused, client
             )
             t0 = timer()
             step(client)
@@ -205,11 +208,11 @@ class PandaSim(OwnsClient):
                     still += 1
                     if still >= n_window:
                         self.stats.add(k + 1, physics)
-                        return k + 1, True
+                        return k + 1, True, tau[7:].copy()
                 else:
                     still = 0
         self.stats.add(n_max, physics)
-        return n_max, False
+        return n_max, False, tau[7:].copy()
 
     def _ramp(self, q0: np.ndarray, q_d: np.ndarray, G_d: pin.SE3, n: int) -> np.ndarray:
         """The joint reference at each of ``n`` ramp steps, ending at ``q_d``: piecewise

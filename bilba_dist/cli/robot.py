@@ -61,7 +61,7 @@ def export(
     to the start joints, the payload, and every motion in the driver's frame, axis order and
     form of stiffness. Every approximation is printed as a warning with its size."""
     from bilba_dist.plans.execute import ee_offset_of
-    from bilba_dist.plans.export import driver_motions, export_text
+    from bilba_dist.plans.export import driver_motions, export_text, with_thresholds
 
     suffix = "-franka-ros.yaml" if target == "franka-ros" else f"-{target}.py"
     out = out or plan_path.with_name(plan_path.stem + suffix)
@@ -70,6 +70,7 @@ def export(
     if not plan.motions:
         raise BilbaError(f"{plan_path}: the plan has no motions to export")
     exported = driver_motions(plan, DRIVERS[target], ee_offset_of(plan, ee_offset))
+    exported = with_thresholds(plan, exported)
     text = export_text(plan, exported, plan_path.name)
     write_output(out, text)
     for warning in exported.warnings:
@@ -109,14 +110,13 @@ def execute(
     1 when one does not."""
     from bilba_dist.plans.execute import (
         describe,
-        driven_motions,
         ee_offset_of,
         final_misses,
         parse_particle,
         particles_for,
         steps_of,
     )
-    from bilba_dist.plans.export import driver_motions
+    from bilba_dist.plans.export import driven_motions, driver_motions
 
     if gui and sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
         raise BilbaError("--gui needs a display (DISPLAY is not set)")
@@ -142,7 +142,11 @@ def execute(
         for k, (step, belief) in enumerate(steps_of(task, motions, belief_particles, backend), 1):
             final = belief
             n = sum(step.reached)
-            click.echo(f"motion {k:<3} meant {step.intended}: {n} of {len(step.reached)} reached")
+            click.echo(
+                f"motion {k:<3} meant {step.intended}: {n} of {len(step.reached)} reached; "
+                f"peak load {max(step.load.wrench[:3]):.1f} N, {max(step.load.wrench[3:]):.1f} "
+                f"N·m, joints {max(step.load.joint_torque):.1f} N·m"
+            )
             for i, ok in enumerate(step.reached):
                 if not ok:
                     click.echo(

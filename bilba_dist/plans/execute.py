@@ -7,7 +7,7 @@ spring wrench runs without the planner's clip. Without one, the plan runs as pla
 """
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -16,9 +16,9 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.planning.result import PlannedMotion
-from bilba_dist.plans.export import Export
 from bilba_dist.plans.file import PlanFile
-from bilba_dist.plans.replay import run_motions
+from bilba_dist.plans.loads import Load, load_of
+from bilba_dist.plans.replay import transitions
 from bilba_dist.robot.drivers import DEFAULT_EE_OFFSET_M
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task, parse_axis_items
@@ -37,13 +37,6 @@ def particles_for(task: Task, extra: Sequence[dict[str, float]]) -> tuple[Partic
     return initial_belief(task) + tuple(make_particle(task, o) for o in extra)
 
 
-def driven_motions(plan: PlanFile, export: Export | None) -> list[PlannedMotion]:
-    """The plan's motions with each K replaced by what the driver holds."""
-    if export is None:
-        return list(plan.motions)
-    return [replace(m, K=d.K_hand) for m, d in zip(plan.motions, export.motions, strict=True)]
-
-
 @dataclass(frozen=True)
 class Step:
     """One motion's outcome: which particles are in the contact it was meant to reach."""
@@ -51,6 +44,7 @@ class Step:
     intended: ContactPair
     reached: list[bool]
     contacts: list[str]
+    load: Load  # the spring's peaks over the particles (plans/loads.py)
 
 
 def describe(particle: Particle) -> str:
@@ -64,12 +58,12 @@ def steps_of(
     particles: Sequence[Particle],
     backend: RolloutBackend,
 ) -> Iterator[tuple[Step, Belief]]:
-    for planned, belief in zip(
-        motions, run_motions(task, motions, particles, backend), strict=False
+    for planned, (belief, results) in zip(
+        motions, transitions(task, motions, particles, backend), strict=False
     ):
         reached = [planned.contact in c for c in belief.contacts]
         shown = [", ".join(sorted(map(str, c))) or "free" for c in belief.contacts]
-        yield Step(planned.contact, reached, shown), belief
+        yield Step(planned.contact, reached, shown, load_of(results)), belief
 
 
 def final_misses(task: Task, belief: Belief) -> list[int]:

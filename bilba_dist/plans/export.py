@@ -14,14 +14,22 @@ motion's timeout.
 """
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 import pinocchio as pin
 
 from bilba_dist.errors import BilbaError
+from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.plans.file import PlanFile
+from bilba_dist.plans.loads import (
+    Thresholds,
+    collision_thresholds,
+    friction_twins,
+    plan_loads,
+    threshold_note,
+)
 from bilba_dist.robot.drivers import (
     R_FLANGE_HAND,
     Driver,
@@ -47,6 +55,8 @@ class Export:
     offset: np.ndarray
     motions: list[DriverMotion]
     warnings: list[str]
+    #: collision thresholds the script sets (`with_thresholds`); None: franka_control's usual
+    thresholds: Thresholds | None = None
 
 
 def driver_motions(plan: PlanFile, driver: Driver, offset: np.ndarray) -> Export:
@@ -77,6 +87,33 @@ def driver_motions(plan: PlanFile, driver: Driver, offset: np.ndarray) -> Export
     if planned_for not in (None, driver.name):
         warnings.append(f"the plan was made for {planned_for}, exported for {driver.name}")
     return Export(driver, offset, motions, warnings)
+
+
+def driven_motions(plan: PlanFile, export: Export | None) -> list[PlannedMotion]:
+    """The plan's motions with each K replaced by what the driver holds."""
+    if export is None:
+        return list(plan.motions)
+    return [replace(m, K=d.K_hand) for m, d in zip(plan.motions, export.motions, strict=True)]
+
+
+def with_thresholds(plan: PlanFile, export: Export) -> Export:
+    """``export`` with the collision thresholds its plan needs: the plan replayed as the
+    driver runs it (`bilba execute --driver`) on its planning particles at the verification
+    frictions, each motion's peak load kept (plans/loads.py)."""
+    from bilba_dist.belief.particles import initial_belief
+    from bilba_dist.task.loader import with_planner
+    from bilba_dist.workers.rollout_worker import RolloutWorker
+
+    task = with_planner(plan.task(), driver=export.driver.name)
+    worker = RolloutWorker(task, "panda")
+    try:
+        particles = friction_twins(task, initial_belief(task))
+        loads = plan_loads(task, driven_motions(plan, export), particles, worker)
+    finally:
+        worker.close()
+    thresholds = collision_thresholds(loads)
+    warnings = [*export.warnings, threshold_note(thresholds)] if thresholds.raised else []
+    return replace(export, thresholds=thresholds, warnings=warnings or export.warnings)
 
 
 def payload(plan: PlanFile) -> tuple[float, list[float], list[float]]:
@@ -126,7 +163,9 @@ def _data(plan: PlanFile, export: Export) -> dict[str, Any]:
             }
         )
     speed, turn, min_s = _rates(plan)
+    t = export.thresholds or collision_thresholds([])
     return {
+        "collision": [t.lower_torque, t.upper_torque, t.lower_wrench, t.upper_wrench],
         "start_joints": start.tolist(),
         "payload": [mass, com, inertia],
         "ramp": [speed, turn, min_s],
@@ -210,6 +249,12 @@ def main(host):
     robot.recover_from_errors()
     robot.relative_dynamics_factor = 0.1
     robot.set_load(*PAYLOAD)
+    robot.set_collision_behavior(
+        lower_torque_threshold=COLLISION[0],
+        upper_torque_threshold=COLLISION[1],
+        lower_force_threshold=COLLISION[2],
+        upper_force_threshold=COLLISION[3],
+    )
     robot.move(JointMotion(JointState(np.array(START_JOINTS))))
     for i, (m, motion) in enumerate(zip(MOTIONS, build())):
         pose = robot.current_pose.end_effector_pose
@@ -245,7 +290,14 @@ def build():
 
 def main(host):
     panda = panda_py.Panda(host)
-    panda.get_robot().set_load(*PAYLOAD)
+    robot = panda.get_robot()
+    robot.set_load(*PAYLOAD)
+    robot.set_collision_behavior(
+        lower_torque_thresholds=COLLISION[0],
+        upper_torque_thresholds=COLLISION[1],
+        lower_force_thresholds=COLLISION[2],
+        upper_force_thresholds=COLLISION[3],
+    )
     panda.move_to_joint_position(np.array(START_JOINTS))
     for i, (m, controller) in enumerate(zip(MOTIONS, build())):
         p0, q0 = panda.get_position(), panda.get_orientation()
@@ -294,6 +346,12 @@ def home(robot):
 def main(host):
     robot = Robot(host)
     robot.set_load(*PAYLOAD)
+    robot.set_collision_behavior(
+        lower_torque_thresholds=COLLISION[0],
+        upper_torque_thresholds=COLLISION[1],
+        lower_force_thresholds=COLLISION[2],
+        upper_force_thresholds=COLLISION[3],
+    )
     home(robot)
     for i, (m, (EE_T_K, values)) in enumerate(zip(MOTIONS, build())):
         robot.set_K(EE_T_K)
@@ -347,6 +405,11 @@ def export_text(plan: PlanFile, export: Export, source: str) -> str:
     lines += [f"START_JOINTS = {data['start_joints']!r}"]
     lines += [f"PAYLOAD = {data['payload']!r}  # mass [kg], F_x_Cload [m], inertia [kg m^2]"]
     lines += [f"RAMP = {data['ramp']!r}  # [m/s], [rad/s], shortest ramp [s]"]
+    lines += [
+        "# Collision thresholds: lower and upper per joint [N m], lower and upper per Cartesian",
+        "# axis at the EE, x y z [N] then about x y z [N m]; past an upper one the robot stops",
+        f"COLLISION = {data['collision']!r}",
+    ]
     lines += ["MOTIONS = " + json.dumps(data["motions"], indent=4), ""]
     lines += [_COMMON.rstrip(), "", rest.rstrip(), ""]
     lines += ['if __name__ == "__main__":']
@@ -356,6 +419,19 @@ def export_text(plan: PlanFile, export: Export, source: str) -> str:
 
 
 CONTROLLER = "cartesian_impedance_example_controller"
+
+
+def _collision_config(collision: list[list[float]]) -> dict[str, list[float]]:
+    """franka_control's ``collision_config`` (its eight arrays: the same thresholds while the
+    arm accelerates and at nominal speed)."""
+    lower_torque, upper_torque, lower_force, upper_force = collision
+    config = {}
+    for phase in ("acceleration", "nominal"):  # copies: no YAML anchors in the file
+        config[f"lower_torque_thresholds_{phase}"] = list(lower_torque)
+        config[f"upper_torque_thresholds_{phase}"] = list(upper_torque)
+        config[f"lower_force_thresholds_{phase}"] = list(lower_force)
+        config[f"upper_force_thresholds_{phase}"] = list(upper_force)
+    return config
 
 
 def _franka_ros(data: dict[str, Any], header: list[str]) -> str:
@@ -385,6 +461,8 @@ def _franka_ros(data: dict[str, Any], header: list[str]) -> str:
         "reconfigure": f"/{CONTROLLER}/dynamic_reconfigure_compliance_param_node",
         "start_joints": data["start_joints"],
         "payload": dict(zip(["mass_kg", "F_x_Cload_m", "inertia"], data["payload"], strict=True)),
+        # franka_control's own parameter: load it into its namespace before it starts
+        "collision_config": _collision_config(data["collision"]),
         "ramp": dict(zip(["speed_m_s", "speed_rad_s", "min_s"], data["ramp"], strict=True)),
         "motions": motions,
     }

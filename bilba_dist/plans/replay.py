@@ -11,9 +11,26 @@ from bilba_dist.belief.particles import Particle, initial_belief, make_particle,
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion
-from bilba_dist.rollout import Motion, RolloutBackend, require_world
+from bilba_dist.rollout import Motion, RolloutBackend, RolloutResult, require_world
 from bilba_dist.task.loader import Task
 from bilba_dist.task.schema import ANGULAR_AXES, PHYSICAL_AXES
+
+
+def transitions(
+    task: Task,
+    motions: Sequence[PlannedMotion],
+    particles: Sequence[Particle],
+    backend: RolloutBackend,
+) -> Iterator[tuple[Belief, list[RolloutResult]]]:
+    """The belief after each motion in turn, with its rollouts, from every particle's start
+    state (one batch per motion)."""
+    require_world(task, backend)
+    belief = start_belief(task, particles)
+    for planned in motions:
+        motion = Motion(planned.K, planned.G_d, planned.timeout_s)
+        results = backend.simulate(belief.under(motion))
+        belief = belief.after(results)
+        yield belief, results
 
 
 def run_motions(
@@ -22,14 +39,8 @@ def run_motions(
     particles: Sequence[Particle],
     backend: RolloutBackend,
 ) -> Iterator[Belief]:
-    """The belief after each motion in turn, from every particle's start state (one batch
-    per motion)."""
-    require_world(task, backend)
-    belief = start_belief(task, particles)
-    for planned in motions:
-        motion = Motion(planned.K, planned.G_d, planned.timeout_s)
-        belief = belief.after(backend.simulate(belief.under(motion)))
-        yield belief
+    """The belief after each motion in turn, from every particle's start state."""
+    return (belief for belief, _ in transitions(task, motions, particles, backend))
 
 
 def replay(
