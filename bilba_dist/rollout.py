@@ -72,6 +72,9 @@ class ParticleState:
     q: np.ndarray = field(default_factory=lambda: np.zeros(7))
     dq: np.ndarray = field(default_factory=lambda: np.zeros(7))
     V_WM: np.ndarray = field(default_factory=lambda: np.zeros(6))  # angular, linear [world]
+    #: Why the real arm would have stopped here (a joint at its limit: a reflex); None while
+    #: it runs. A stopped particle stays where it is and in no contact for every later motion.
+    stopped: str | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", _frozen(self.q, (7,)))

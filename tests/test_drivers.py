@@ -297,6 +297,26 @@ def test_exported_collision_thresholds_let_the_plans_own_contacts_through(
         assert len(peaks) == len(plan.motions) and max(peaks) <= max(t.peak_wrench[:3]) + 0.05
 
 
+def test_a_plan_replays_from_its_recorded_start_joints(default_plan_file, tmp_path):
+    """The robot homes to the plan's start_joints, so `execute`, `validate` and `export`
+    start there too, even where this version's start IK would pick another posture (here
+    the file edited to another IK solution of the same hand pose)."""
+    from bilba_dist.belief.start import start_joints
+    from bilba_dist.plans.file import read_plan
+    from bilba_dist.robot.panda import PandaModel
+
+    document = json.loads(default_plan_file.read_text())
+    task = read_plan(default_plan_file).task()
+    recorded = np.array(document["robot"]["start_joints"])
+    assert np.array_equal(start_joints(task), recorded)
+    other = PandaModel().ik(task.X_WG0, recorded + np.array([0.4, 0, -0.4, 0, 0.4, 0, 0.0]))
+    assert np.abs(other - recorded).max() > 0.05  # another posture, the same hand pose
+    document["robot"]["start_joints"] = other.tolist()
+    path = tmp_path / "other.json"
+    path.write_text(json.dumps(document))
+    assert np.array_equal(start_joints(read_plan(path).task()), other)
+
+
 def test_collision_thresholds_rise_only_where_the_plan_needs_it():
     from bilba_dist.plans.loads import Load, collision_thresholds, threshold_note
 

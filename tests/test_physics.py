@@ -1,5 +1,7 @@
 """Rollouts on the PyBullet Panda and the floating model (real physics, no mocks)."""
 
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pybullet as p
@@ -163,6 +165,57 @@ def test_unreachable_setpoint_is_reported_not_raised(nominal_peg):
     assert not result.reachable
     assert result.sim_time_s == 0.0
     worker.close()
+
+
+def test_a_joint_at_its_limit_stops_the_particle_as_a_reflex_would():
+    """A Franka halts with a reflex when a joint reaches its limit; the simulated arm would
+    rest on the stop and go on. From a posture with joint 7 on its upper limit, holding the
+    hand there, the particle stops: no contact, the reason kept, and every later rollout
+    leaves it where it is without simulating; a belief holding it counts no particle in.
+    0.05 rad inside the limit, the same motion runs as usual."""
+    from bilba_dist.belief.state import Belief
+
+    task = load_task(FLAT)
+    (particle,) = initial_belief(task)
+    worker = RolloutWorker(task, "panda")
+    model = worker.panda_sim(particle.X_GM).model
+    for inside, stops in ((0.0, True), (0.05, False)):
+        q = start_state(task, particle).q.copy()
+        q[6] = model.upper[6] - inside
+        X_WG = model.fk(q)
+        state = start_state(task, particle).__class__(X_WM=X_WG * particle.X_GM, q=q)
+        result = run(worker, task, particle, X_WG, state=state)
+        assert (result.state.stopped is not None) == stops
+        if not stops:
+            continue
+        assert result.state.stopped.startswith("joint 7 reached its upper limit (2.8973 rad)")
+        assert result.contacts == frozenset() and result.sim_time_s > 0
+        later = run(
+            worker, task, particle, moved(task.X_WG0, xyz=(0, 0, -0.11)), state=result.state
+        )
+        assert later.state is result.state and later.sim_time_s == 0.0
+        belief = Belief((particle,), (later.state,), ({ContactPair("block/+z", "peg/-z")},))
+        assert belief.count(frozenset({ContactPair("block/+z", "peg/-z")})) == 0
+    worker.close()
+
+
+def test_the_start_posture_keeps_clear_of_every_joint_limit():
+    """A start given by joints with joint 7 on its limit would stop a Franka before the
+    first motion: the start IK takes another posture of the same hand pose."""
+    import yaml
+
+    from bilba_dist.belief.start import start_joints
+    from bilba_dist.robot.panda import LIMIT_MARGIN_RAD, Q_CENTRE, PandaModel
+
+    model = PandaModel()
+    on_limit = Q_CENTRE.copy()
+    on_limit[6] = model.upper[6]
+    data = yaml.safe_load(Path(FLAT).read_text())
+    data["robot_start"] = {"joints": on_limit.tolist()}
+    task = load_task(data)
+    q = start_joints(task)
+    assert np.all(q > model.lower + LIMIT_MARGIN_RAD) and np.all(q < model.upper - LIMIT_MARGIN_RAD)
+    assert np.allclose(model.fk(q).homogeneous, task.X_WG0.homogeneous, atol=1e-5)
 
 
 def link_index(robot: int, client: int, name: str) -> int:
@@ -342,8 +395,9 @@ def test_compiled_control_step_matches_the_impedance_law(far):
         wrench = wrench * min(1.0, 20.0 / norm)
         expected = J.T @ wrench + K_null @ e - B_q @ x[7:] + g
         expected = np.clip(expected, -TORQUE_LIMITS, TORQUE_LIMITS)
-        tau = np.zeros(20)
-        tau[7:] = 0.5  # peaks so far: kept where the step's own are lower
+        tau = np.zeros(34)
+        tau[7:20] = 0.5  # peaks so far: kept where the step's own are lower
+        tau[20:27], tau[27:] = x[:7] + 0.01, x[:7] - 0.01  # joint ranges so far
         feed = ramp @ gains.ref_gains.T
         calm = 0.1
         still = joint_torque(
@@ -351,7 +405,8 @@ def test_compiled_control_step_matches_the_impedance_law(far):
         )
         assert np.allclose(tau[:7], expected, rtol=1e-9, atol=1e-9)
         assert np.allclose(tau[7:13], np.maximum(0.5, np.abs(wrench)), rtol=1e-9)
-        assert np.allclose(tau[13:], np.maximum(0.5, np.abs(J.T @ wrench)), rtol=1e-9)
+        assert np.allclose(tau[13:20], np.maximum(0.5, np.abs(J.T @ wrench)), rtol=1e-9)
+        assert np.array_equal(tau[20:27], x[:7]) and np.array_equal(tau[27:], x[:7])
         assert still == bool(np.all(np.abs(x[7:]) < calm))
         settled += still
     assert 0 < settled < 40  # both answers of the settle test were checked

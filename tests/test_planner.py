@@ -21,6 +21,7 @@ from bilba_dist.planning.setpoints import SetpointParams, sample_setpoints
 from bilba_dist.planning.stiffness import VERY_STIFF, variable_stiffness
 from bilba_dist.plans.file import plan_document, read_plan, write_plan
 from bilba_dist.plans.replay import replay
+from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import load_task
 from bilba_dist.workers.rollout_worker import RolloutWorker
 
@@ -36,7 +37,8 @@ CHEAP = {
 
 
 def belief_with(contacts):
-    return Belief((None,) * len(contacts), (None,) * len(contacts), tuple(map(frozenset, contacts)))  # type: ignore[arg-type]
+    states = tuple(ParticleState(X_WM=pin.SE3.Identity()) for _ in contacts)
+    return Belief((None,) * len(contacts), states, tuple(map(frozenset, contacts)))  # type: ignore[arg-type]
 
 
 def test_score_counts_particles_and_adds_contact_iou():

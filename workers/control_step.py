@@ -32,15 +32,19 @@ def joint_torque(
     the torque ``clip(Jᵀ w + k_n N e − B_q q̇ + g, ±tau_max)`` at ramp step ``i`` for
     ``x = [q; q̇]``, ``e = q_ref[i] − q``, ``w = K J e`` norm-clipped at ``limit``.
 
-    ``tau`` is 20 long: the torque in ``tau[:7]``; ``tau[7:13]`` and ``tau[13:20]`` keep the
+    ``tau`` is 34 long: the torque in ``tau[:7]``; ``tau[7:13]`` and ``tau[13:20]`` keep the
     running peaks of ``|w|`` per axis and of ``|Jᵀ w|`` per joint (the spring's wrench and
     its joint torques: in contact, what the robot's external-force estimate reads and its
-    collision thresholds are compared with; the caller zeroes them before a rollout).
+    collision thresholds are compared with), ``tau[20:27]`` and ``tau[27:34]`` the lowest
+    and highest angle of each joint (a joint at its limit: the real arm's reflex). The
+    caller starts them at 0, 0, +inf and -inf before a rollout.
 
     ``G x + feed[i]`` gives ``[w; τ − g]`` unclipped in one 13×14 product
     (`JointImpedance`); past the limit the wrench is scaled by ``s = limit/|w|``, which
     takes ``(1 − s) Jᵀ w`` off the torque. Ten arguments, not more: Numba types each one
     on every call, and the loop calls this at every physics step."""
+    if tau.shape[0] != 34:  # compiled code writes past a shorter array unchecked
+        raise ValueError("joint_torque: tau must hold 34 values")
     w = np.empty(6)
     w2 = 0.0
     for r in range(13):
@@ -69,6 +73,9 @@ def joint_torque(
         for r in range(6):
             acc += Jt[j, r] * w[r]
         tau[13 + j] = max(tau[13 + j], abs(acc) * scale)
+    for j in range(7):
+        tau[20 + j] = min(tau[20 + j], x[j])
+        tau[27 + j] = max(tau[27 + j], x[j])
     still = True
     for j in range(7):
         tau[j] = min(max(tau[j] + g[j], -tau_max[j]), tau_max[j])

@@ -17,7 +17,7 @@ import pybullet as p
 
 from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.drivers import planning_arms
-from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
+from bilba_dist.robot.panda import ARM_JOINTS, LIMIT_MARGIN_RAD, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
 from bilba_dist.workers.control_step import joint_torque
@@ -153,6 +153,8 @@ class PandaSim(OwnsClient):
         motion: Motion,
         physics: tuple[float, float] = (1.0, 1.0),
     ) -> RolloutResult:
+        if start.stopped:  # its arm stopped with a reflex: nothing moves any more
+            return RolloutResult(start, frozenset(), start.q, 0.0, True)
         self.reset(X_WO, start.q, start.dq, physics)
         try:
             q_d = self.model.ik(motion.G_d, start.q)
@@ -160,7 +162,24 @@ class PandaSim(OwnsClient):
             return self._result(X_WO, start.q, 0.0, settled=False, reachable=False)
         steps, settled, peaks = self._run(start.q, q_d, motion)
         result = self._result(X_WO, q_d, steps * self.settings.timestep_s, settled, True)
-        return replace(result, peak_wrench=peaks[:6], peak_joint_torque=peaks[6:])
+        result = replace(result, peak_wrench=peaks[:6], peak_joint_torque=peaks[6:13])
+        stop = self._limit_reached(peaks[13:20], peaks[20:27])
+        if stop is None:
+            return result
+        return replace(result, state=replace(result.state, stopped=stop), contacts=frozenset())
+
+    def _limit_reached(self, low: np.ndarray, high: np.ndarray) -> str | None:
+        """Why the real arm would have stopped: a joint that came within LIMIT_MARGIN_RAD of
+        its limit (a Franka halts there with a joint-position-limit reflex; the simulated
+        arm would rest on the stop and go on). None when every joint kept clear."""
+        for j in range(7):
+            for side, limit, reached in (
+                ("lower", self.model.lower[j], low[j] <= self.model.lower[j] + LIMIT_MARGIN_RAD),
+                ("upper", self.model.upper[j], high[j] >= self.model.upper[j] - LIMIT_MARGIN_RAD),
+            ):
+                if reached:
+                    return f"joint {j + 1} reached its {side} limit ({limit:.4f} rad)"
+        return None
 
     def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool, np.ndarray]:
         """Step the controller until the motion has settled or timed out. Also returns the
@@ -184,7 +203,8 @@ class PandaSim(OwnsClient):
         G, Jt = gains.state_gains, gains.Jt
         limit, last, tau_max = gains.limit, n_ramp - 1, TORQUE_LIMITS
         still, physics, calm, watch = 0, 0.0, s.settle_joint_speed, s.early_stop
-        x, tau = np.empty(14), np.zeros(20)  # x = [q; q̇]; tau: torque, then the peaks
+        x, tau = np.empty(14), np.zeros(34)  # x = [q; q̇]; tau: torque, then the peaks
+        tau[20:27], tau[27:] = np.inf, -np.inf  # and each joint's range (`joint_torque`)
         out = tau[:7]
         q, position, speed, unused = x[:7], itemgetter(0), itemgetter(1), [0.0] * 7
         # Every argument passed by position (physicsClientId last, the position-control

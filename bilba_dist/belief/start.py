@@ -8,7 +8,7 @@ from bilba_dist.belief.particles import Particle
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import TaskError, UnreachableError
 from bilba_dist.robot.drivers import planning_arms
-from bilba_dist.robot.panda import Q_CENTRE, PandaModel
+from bilba_dist.robot.panda import LIMIT_MARGIN_RAD, Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import Task
 
@@ -43,13 +43,24 @@ def _start_joints(task: Task, arms: tuple[str, ...], first: np.ndarray) -> np.nd
     model = PandaModel(arms=arms)
     rng = np.random.default_rng(0)
     seeds = [first, *(rng.uniform(model.lower, model.upper) for _ in range(START_SEEDS))]
-    nearest = float("inf")
+    nearest, at_limit = float("inf"), None
     for seed in seeds:
         try:
-            return model.ik(task.X_WG0, seed)
+            q = model.ik(task.X_WG0, seed)
         except UnreachableError as exc:
             nearest = min(nearest, exc.residual)
+            continue
+        clear = (q > model.lower + LIMIT_MARGIN_RAD) & (q < model.upper - LIMIT_MARGIN_RAD)
+        if clear.all():
+            return q
+        at_limit = at_limit if at_limit is not None else int(np.flatnonzero(~clear)[0]) + 1
     xyz = ", ".join(f"{v:.4g}" for v in task.X_WG0.translation)
+    if at_limit is not None:  # a real arm would stop with a reflex before the first motion
+        raise TaskError(
+            f"{task.source}: robot_start: the hand at [{xyz}] m turned as given is reached "
+            f"only with joint {at_limit} at its limit (from {len(seeds)} starting postures), "
+            "where a Franka stops with a reflex; move or turn the start"
+        )
     driver = task.spec.planner.driver
     arm = " and ".join(f"{a}'s" for a in arms)
     arm += f" (planner.driver {driver})" if driver != "none" else ""

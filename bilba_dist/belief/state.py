@@ -60,11 +60,21 @@ class Belief:
         return self.particles[i].X_WO.inverse() * self.states[i].X_WM
 
     def count(self, accept: Accept) -> int:
-        """Particles whose contact set holds one of the ``accept`` modes."""
+        """Particles whose contact set holds one of the ``accept`` modes; none at all once
+        one particle's arm has stopped (a joint at its limit): the real robot would have
+        halted the whole plan there, so such a motion is no progress for any particle."""
+        if self.stopped():
+            return 0
         return sum(bool(c & accept) for c in self.contacts)
 
     def score(self, accept: Accept) -> float:
+        if self.stopped():
+            return 0.0
         return self.count(accept) + LAMBDA * contact_iou(self.contacts)
+
+    def stopped(self) -> list[int]:
+        """The particles whose arm stopped with a reflex (`ParticleState.stopped`)."""
+        return [i for i, s in enumerate(self.states) if s.stopped is not None]
 
 
 def d_bel(contacts: Sequence[ContactSet]) -> ContactSet:

@@ -151,7 +151,7 @@ def execute(
                 if not ok:
                     click.echo(
                         f"           particle {i} ({describe(belief.particles[i])}) "
-                        f"is in {step.contacts[i]}"
+                        f"{step.contacts[i]}"
                     )
     finally:
         backend.close()

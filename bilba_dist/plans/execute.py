@@ -43,7 +43,7 @@ class Step:
 
     intended: ContactPair
     reached: list[bool]
-    contacts: list[str]
+    contacts: list[str]  # "is in CONTACTS" (or "stopped: WHY") per particle
     load: Load  # the spring's peaks over the particles (plans/loads.py)
 
 
@@ -62,7 +62,12 @@ def steps_of(
         motions, transitions(task, motions, particles, backend), strict=False
     ):
         reached = [planned.contact in c for c in belief.contacts]
-        shown = [", ".join(sorted(map(str, c))) or "free" for c in belief.contacts]
+        shown = [
+            f"stopped: {s.stopped}, where a Franka halts with a reflex"
+            if s.stopped
+            else "is in " + (", ".join(sorted(map(str, c))) or "free")
+            for s, c in zip(belief.states, belief.contacts, strict=True)
+        ]
         yield Step(planned.contact, reached, shown, load_of(results)), belief
 
 

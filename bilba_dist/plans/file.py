@@ -162,9 +162,17 @@ class PlanFile:
 
     def task(self, override: str | None = None) -> Task:
         """The plan's task: the one embedded (version 2), else the built-in or file of its
-        name with its uncertainty; ``override`` (a name or file) replaces either."""
+        name with its uncertainty; ``override`` (a name or file) replaces either.
+
+        The embedded task starts from the plan's recorded ``start_joints`` (they seed the start
+        IK, which returns them as they are): the robot homes there, so a replay must start
+        there too, even where this version's start IK would pick another posture."""
         if override is None and self.spec is not None:
-            return build_task(self.spec, str(self.document["task"]["source"]))
+            spec = self.spec
+            if self.start_joints is not None:
+                start = spec.robot_start.model_copy(update={"joints": tuple(self.start_joints)})
+                spec = spec.model_copy(update={"robot_start": start})
+            return build_task(spec, str(self.document["task"]["source"]))
         overrides = [f"{k}={v}" for k, v in self.uncertainty.items()]
         return load_task(override or self.task_name, overrides)
 

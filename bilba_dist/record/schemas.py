@@ -26,6 +26,7 @@ PARTICLE = {
         "X_WM": POSE,
         "contacts": {"type": "array", "items": CONTACT},
         "q": {**VEC, "minItems": 7, "maxItems": 7},  # arm joints [rad]; absent in older logs
+        "stopped": {"type": "string"},  # why its arm stopped (a joint at its limit)
     },
     "required": ["X_WM", "contacts"],
 }

@@ -39,6 +39,7 @@ def particles(belief: Belief) -> list[dict[str, Any]]:
             "X_WM": pose_json(s.X_WM),
             "contacts": sorted([list(c) for c in contacts]),
             "q": [float(v) for v in s.q],
+            **({"stopped": s.stopped} if s.stopped else {}),
         }
         for s, contacts in zip(belief.states, belief.contacts, strict=True)
     ]

@@ -20,6 +20,10 @@ HAND = "panda_hand"
 #: Torque limits of the seven arm joints [N·m] (Franka's datasheet; docs/reference-values.md).
 TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
 #: A comfortable mid-range posture: the IK's joint-centring target.
+#: A joint this close to its limit has reached it: a Franka stops there with a reflex, so a
+#: simulated rollout that comes this close ends its particle's run, and a start posture
+#: keeps at least this far away [rad].
+LIMIT_MARGIN_RAD = 1e-3
 Q_CENTRE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 
 #: Joint position limits [rad] from Franka's robot specifications. The Panda URDF we load
