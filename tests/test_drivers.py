@@ -317,6 +317,42 @@ def test_a_plan_replays_from_its_recorded_start_joints(default_plan_file, tmp_pa
     assert np.array_equal(start_joints(read_plan(path).task()), other)
 
 
+def test_the_libfranka_ramp_keeps_within_the_pose_generators_limits(default_plan_file, tmp_path):
+    """libfranka's Cartesian pose generator does no rate limiting and stops the arm where the
+    commanded pose's acceleration or jerk passes 13 m/s² or 6500 m/s³: a linear ramp at
+    0.1 m/s jumps to 100 m/s² in its first millisecond. The script eases the ramp in and out
+    (run here at 1 kHz, numpy only), and the simulator runs the same profile."""
+    from bilba_dist.workers.motion import ramp_fractions
+
+    out = tmp_path / "lf.py"
+    result = run_cli("export", str(default_plan_file), "--target", "libfranka", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    tree = ast.parse(out.read_text())
+    wanted = [n for n in tree.body if getattr(n, "name", "") == "fraction"]
+    wanted += [n for n in tree.body if isinstance(n, ast.Assign) and "BLEND_S" in ast.unparse(n)]
+    space: dict = {"np": np}
+    exec(compile(ast.Module(wanted, []), "fraction", "exec"), space)
+    fraction, blend = space["fraction"], space["BLEND_S"]
+    assert blend == DRIVERS["libfranka"].ramp_blend_s > 0
+    from bilba_dist.workers.settings import SimSettings, driver_settings
+
+    assert driver_settings(SimSettings(), "libfranka").ramp_blend_s == blend
+    assert driver_settings(SimSettings(), "franky").ramp_blend_s == 0.0
+    dt = 1e-3
+    for ramp in (0.2, 0.8, 3.0):  # the shortest ramp, and longer ones, at 0.1 m/s
+        t = np.arange(0, ramp + blend + 0.05, dt)
+        x = 0.1 * ramp * np.array([fraction(v, ramp) for v in t])
+        v, a = np.diff(x) / dt, np.diff(x, 2) / dt**2
+        assert x[0] == 0 and x[-1] == pytest.approx(0.1 * ramp)
+        assert v.max() <= 0.1 + 1e-9 and abs(a).max() < 13 / 4 and abs(np.diff(a) / dt).max() < 100
+        linear = 0.1 * ramp * np.minimum(1.0, t / ramp)
+        assert abs(np.diff(linear, 2) / dt**2).max() > 13  # what the script used to send
+        steps = round(ramp * 240)  # the simulator's steps at 240 Hz: the same profile
+        sim = ramp_fractions(steps, round(blend * 240))
+        script = [fraction(k / 240, steps / 240) for k in range(1, len(sim) + 1)]
+        assert np.allclose(sim, script, atol=1e-12)
+
+
 def test_collision_thresholds_rise_only_where_the_plan_needs_it():
     from bilba_dist.plans.loads import Load, collision_thresholds, threshold_note
 

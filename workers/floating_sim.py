@@ -20,8 +20,10 @@ from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
 from bilba_dist.workers.motion import (
     SimStats,
+    blend_steps,
     damping,
     label_final_contacts,
+    ramp_fractions,
     ramp_poses,
     ramp_steps,
 )
@@ -138,8 +140,9 @@ class FloatingSim(OwnsClient):
         s, body, client = self.settings, self.body, self.client
         K, B = motion.K, damping(motion.K)
         p_MG, R_MG = X_GM.inverse().translation, X_GM.inverse().rotation
-        n_ramp = ramp_steps(X_WG0, motion.G_d, s)
-        ramp_R, ramp_p = ramp_poses(X_WG0, motion.G_d, n_ramp)
+        fractions = ramp_fractions(ramp_steps(X_WG0, motion.G_d, s), blend_steps(s))
+        n_ramp = len(fractions)
+        ramp_R, ramp_p = ramp_poses(X_WG0, motion.G_d, n_ramp, fractions)
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
         world, step, timer, log3 = p.WORLD_FRAME, p.stepSimulation, time.perf_counter, pin.log3

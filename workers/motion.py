@@ -38,6 +38,31 @@ def ramp_steps(X_start: pin.SE3, X_goal: pin.SE3, settings: SimSettings) -> int:
     return max(1, math.ceil(seconds / settings.timestep_s))
 
 
+def blend_steps(settings: SimSettings) -> int:
+    """Steps over which the ramp's speed eases in (and out): 0 for a plain linear ramp."""
+    return round(settings.ramp_blend_s / settings.timestep_s)
+
+
+def ramp_fractions(n: int, blend: int) -> np.ndarray:
+    """How far along the ramp the setpoint is at each of its ``n + blend`` steps: 1/n of the
+    way a step, or with ``blend`` > 0 that speed eased in and out over ``blend`` steps by a
+    raised cosine (continuous velocity and acceleration; it trails the linear ramp by
+    ``blend / 2`` steps and ends ``blend`` steps later). The exported libfranka script runs
+    the same profile in time (plans/export.py, ``fraction``)."""
+    k = np.arange(1, n + blend + 1, dtype=float)
+    if blend <= 0:
+        return np.minimum(1.0, k / n)
+    v, b = 1.0 / n, float(min(blend, n))
+
+    def eased(u: np.ndarray) -> np.ndarray:
+        return v * (u / 2 - b / (2 * np.pi) * np.sin(np.pi * u / b))
+
+    plateau = v * (k - b / 2)
+    out = np.where(k < b, eased(k), plateau)
+    out = np.where(k > n, 1.0 - eased(np.maximum(n + b - k, 0.0)), out)
+    return np.minimum(out, 1.0)
+
+
 def label_final_contacts(
     env: EnvironmentBodies,
     manipuland: Part,
@@ -65,9 +90,12 @@ def label_final_contacts(
     return frozenset(contacts)
 
 
-def ramp_poses(X_start: pin.SE3, X_goal: pin.SE3, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The setpoint at each of ``n`` ramp steps, along the SE(3) geodesic: (n, 3, 3)
-    rotations and (n, 3) positions, ending at ``X_goal``."""
+def ramp_poses(
+    X_start: pin.SE3, X_goal: pin.SE3, n: int, fractions: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The setpoint at each of ``n`` ramp steps (or at each of ``fractions`` of the way),
+    along the SE(3) geodesic: rotations and positions, ending at ``X_goal``."""
     delta = pin.log6(X_start.actInv(X_goal)).vector
-    poses = [X_start * pin.exp6((k + 1) / n * delta) for k in range(n)]
+    along = [(k + 1) / n for k in range(n)] if fractions is None else fractions
+    poses = [X_start * pin.exp6(f * delta) for f in along]
     return np.array([X.rotation for X in poses]), np.array([X.translation for X in poses])

@@ -23,8 +23,10 @@ from bilba_dist.task.loader import Task
 from bilba_dist.workers.control_step import joint_torque
 from bilba_dist.workers.motion import (
     SimStats,
+    blend_steps,
     damping,
     label_final_contacts,
+    ramp_fractions,
     ramp_poses,
     ramp_steps,
 )
@@ -192,6 +194,7 @@ class PandaSim(OwnsClient):
         gains = JointImpedance.at(self.model, q_d, motion.K, s)
         n_ramp = ramp_steps(self.model.fk(q0), motion.G_d, s)
         ramp = self._ramp(q0, q_d, motion.G_d, n_ramp)
+        n_ramp = len(ramp)  # longer by the blend where the driver eases the ramp
         feed = ramp @ gains.ref_gains.T  # the reference's share of [wrench; τ], per step
         n_max = math.ceil(motion.timeout_s / s.timestep_s - 1e-9)
         n_window = math.ceil(s.settle_window_s / s.timestep_s)
@@ -235,8 +238,9 @@ class PandaSim(OwnsClient):
         return n_max, False, tau[7:].copy()
 
     def _ramp(self, q0: np.ndarray, q_d: np.ndarray, G_d: pin.SE3, n: int) -> np.ndarray:
-        """The joint reference at each of ``n`` ramp steps, ending at ``q_d``: piecewise
-        linear through knots spaced evenly in ramp time.
+        """The joint reference at each ramp step, ending at ``q_d``: piecewise linear
+        through knots spaced evenly along the ramp, ``n`` steps at the ramp's speed (plus
+        ``blend_steps`` where the driver eases it in and out: `ramp_fractions`).
 
         The knots are just ``q0`` and ``q_d`` (a straight line in joint space) by default.
         With ``cartesian_ramp`` they add IK waypoints every ``ramp_waypoint_steps`` steps
@@ -253,7 +257,7 @@ class PandaSim(OwnsClient):
             except UnreachableError:  # a waypoint out of reach: the joint line after all
                 knots = [q0]
         path = np.array([*knots, q_d])
-        t = np.minimum(1.0, np.arange(1, n + 1) / n) * (len(path) - 1)
+        t = ramp_fractions(n, blend_steps(self.settings)) * (len(path) - 1)
         j = np.minimum(t.astype(int), len(path) - 2)
         return path[j] + (t - j)[:, None] * (path[j + 1] - path[j])
 

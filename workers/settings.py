@@ -12,6 +12,7 @@ class SimSettings:
     ramp_speed_m_s: float = 0.1  # setpoint ramp: translation speed ...
     ramp_speed_rad_s: float = 0.5  # ... and rotation speed; the slower one sets the time
     min_ramp_s: float = 0.2
+    ramp_blend_s: float = 0.0  # ease the ramp's speed in and out over this long (libfranka)
     cartesian_ramp: bool = False  # Panda: reference through IK waypoints on the hand's
     ramp_waypoint_steps: int = 8  # straight line (SE(3) geodesic), one every N steps
     settle_window_s: float = 0.25  # stop once still this long after the ramp ends
@@ -32,7 +33,7 @@ def driver_settings(settings: SimSettings, driver: str) -> SimSettings:
     setpoint along a straight line, and only franky can bound the spring's wrench."""
     from bilba_dist.robot.drivers import DRIVERS
 
-    settings = replace(settings, cartesian_ramp=True)
+    settings = replace(settings, cartesian_ramp=True, ramp_blend_s=DRIVERS[driver].ramp_blend_s)
     if not DRIVERS[driver].wrench_clip:
         settings = replace(settings, spring_limit=float("inf"))
     return settings

@@ -329,6 +329,32 @@ def build():
     return built
 
 
+BLEND_S = 0.1  # the ramp's speed eases in and out over this long (raised cosine)
+
+
+def fraction(t, ramp):
+    """How far along its ramp the setpoint is at time t: the plan's constant speed (1/ramp
+    of the way a second), eased in and out over BLEND_S so that velocity and acceleration
+    are continuous. libfranka's Cartesian pose generator does no rate limiting of its own
+    and stops the arm on a jump (at 0.1 m/s in 1 ms: 100 m/s^2, past its 13); eased, the
+    peaks are pi/2 the speed per BLEND_S (1.6 m/s^2 at 0.1 m/s) and about 49 m/s^3. The
+    setpoint trails the plan's by speed * BLEND_S / 2 (5 mm) and arrives BLEND_S later."""
+    b, v = BLEND_S, 1.0 / ramp
+
+    def eased(u):  # distance covered u seconds into an ease-in
+        return v * (u / 2 - b / (2 * np.pi) * np.sin(np.pi * u / b))
+
+    if t <= 0:
+        return 0.0
+    if t < b:
+        return eased(t)
+    if t <= ramp:
+        return v * (t - b / 2)
+    if t < ramp + b:
+        return 1.0 - eased(ramp + b - t)
+    return 1.0
+
+
 def home(robot):
     control = robot.start_joint_position_control(ControllerMode.JointImpedance)
     state, _ = control.readOnce()
@@ -358,14 +384,14 @@ def main(host):
         robot.set_cartesian_impedance(values)
         control = robot.start_cartesian_pose_control(ControllerMode.CartesianImpedance)
         state, _ = control.readOnce()
-        start = np.array(state.O_T_EE).reshape(4, 4, order="F")
+        start = np.array(state.O_T_EE_c).reshape(4, 4, order="F")  # the last commanded pose
         p0, q0 = start[:3, 3], quat_of(start[:3, :3])
         ramp = ramp_s(p0, q0, m["position"], m["quat_xyzw"])
         elapsed = 0.0
         while elapsed < m["timeout_s"]:
             state, period = control.readOnce()
             elapsed += period.to_sec()
-            p, q = interpolate(p0, q0, m["position"], m["quat_xyzw"], min(1.0, elapsed / ramp))
+            p, q = interpolate(p0, q0, m["position"], m["quat_xyzw"], fraction(elapsed, ramp))
             x, y, z, w = q
             R = np.array([
                 [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],

@@ -56,6 +56,10 @@ class Driver:
     damping: str
     wrench_clip: bool  # can the driver bound the spring's wrench as the planner did
     arms: tuple["ArmName", ...]  # the arms its usual build drives (joint limits to check)
+    #: The exported script eases the setpoint ramp's speed in and out over this long [s]:
+    #: a driver that sends the pose through libfranka's Cartesian pose generator, which does
+    #: no rate limiting and stops the arm on a jump in velocity (plans/export.py)
+    ramp_blend_s: float = 0.0
 
 
 ArmName = Literal["Panda", "Franka Research 3"]
@@ -98,6 +102,7 @@ DRIVERS: dict[str, Driver] = {
         "computed by the robot (critical, per axis of the stiffness frame)",
         False,
         ("Franka Research 3",),
+        ramp_blend_s=0.1,
     ),
     "franka-ros": Driver(
         "franka-ros",
