@@ -537,9 +537,18 @@ def test_a_hole_moved_and_turned_on_the_table_plans_with_the_defaults():
     task = load_task(_moved_hole("30deg"), ["env.y=1cm"])
     worker = RolloutWorker(task, "panda")
     result = plan(task, worker, "bilba-variable", seed=0, timeout_s=120)
-    worker.close()
     assert result.success, result.reason
     assert result.verification is not None and result.verification.passed
+    # the wrist works near joint 5's limit: no particle of the plan, at any friction
+    # checked, leans on a joint's stop (where a Franka would halt with a reflex)
+    from bilba_dist.plans.loads import friction_twins
+    from bilba_dist.plans.replay import transitions
+
+    twins = friction_twins(task, initial_belief(task))
+    beliefs = [b for b, _ in transitions(task, result.motions, twins, worker)]
+    worker.close()
+    assert len(twins) == 9 and all(b.stopped() == [] for b in beliefs)
+    assert sum(task.goal in c for c in beliefs[-1].contacts) == 9
     assert all(task.goal in contacts for contacts in result.final_belief.contacts)
 
 
@@ -581,17 +590,26 @@ def test_a_sideways_insertion_plans_from_a_start_the_centre_posture_cannot_reach
     from bilba_dist.errors import UnreachableError
     from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 
-    task = load_task(_sideways([0.55, 0, 0.45]))
-    model = PandaModel()
+    task = load_task(_sideways([0.55, 0, 0.45]), ["grasp.x=1cm"])  # 22 of its 490 rollouts
+    model = PandaModel()  # stop a particle at joint 5's limit (2026-12-06)
     with pytest.raises(UnreachableError):
         model.ik(task.X_WG0, Q_CENTRE)
     q = start_joints(task)
     assert np.allclose(model.fk(q).homogeneous, task.X_WG0.homogeneous, atol=1e-4)
     worker = RolloutWorker(task, "panda")
     result = plan(task, worker, "bilba-variable", seed=0, timeout_s=120)
-    worker.close()
     assert result.success, result.reason
     assert result.verification is not None and result.verification.passed
+    # the wrist works near joint 5's limit: no particle of the plan, at any friction
+    # checked, leans on a joint's stop (where a Franka would halt with a reflex)
+    from bilba_dist.plans.loads import friction_twins
+    from bilba_dist.plans.replay import transitions
+
+    twins = friction_twins(task, initial_belief(task))
+    beliefs = [b for b, _ in transitions(task, result.motions, twins, worker)]
+    worker.close()
+    assert len(twins) == 9 and all(b.stopped() == [] for b in beliefs)
+    assert sum(task.goal in c for c in beliefs[-1].contacts) == 9
 
 
 def test_a_start_out_of_reach_is_one_line_naming_robot_start(tmp_path):
