@@ -247,6 +247,14 @@ def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
             json.dumps({**doc, "robot": {k: v for k, v in robot.items() if k != "start_joints"}}),
             "'start_joints' is a required property",
         ),
+        "start joints elsewhere": (
+            json.dumps({**doc, "robot": {**robot, "start_joints": [0.0] * 7}}),
+            "robot/start_joints put the hand",
+        ),
+        "start joints 1e308": (
+            json.dumps({**doc, "robot": {**robot, "start_joints": [1e308] * 7}}),
+            "robot/start_joints put the hand",
+        ),
         "task spec invalid": (
             json.dumps({**doc, "task": {**doc["task"], "spec": {**spec, "friction": -1}}}),
             "task.spec.friction",

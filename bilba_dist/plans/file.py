@@ -229,7 +229,32 @@ def read_plan(path: PathArg) -> PlanFile:
     if version == 1:
         return PlanFile(document, motions)
     _check_damping(document, motions, path)
-    return PlanFile(document, motions, _checked_task(document, path))
+    spec = _checked_task(document, path)
+    _check_start(document, spec, path)
+    return PlanFile(document, motions, spec)
+
+
+#: How far the recorded start joints may put the hand from the task's start pose [m, rad]
+#: (the start IK converges to 1e-5).
+START_TOL = 1e-4
+
+
+def _check_start(document: dict[str, Any], spec: TaskSpec, path: Path) -> None:
+    """The robot homes to ``robot.start_joints`` before the first motion, and every replay
+    starts there: they must put the hand at the task's start pose (an edited file could send
+    the arm anywhere)."""
+    from bilba_dist.robot.panda import PandaModel
+    from bilba_dist.task.loader import start_gripper_pose
+
+    q = np.array(document["robot"]["start_joints"], dtype=float)
+    with np.errstate(all="ignore"):
+        error = pin.log6(PandaModel().fk(q).actInv(start_gripper_pose(spec))).vector
+    off = float(np.linalg.norm(error)) if np.all(np.isfinite(q)) else float("inf")
+    if not off <= START_TOL:
+        raise BilbaError(
+            f"{path}: malformed plan file: robot/start_joints put the hand {off:.3g} (m, rad) "
+            "from the task's start pose: edited, or from another task"
+        )
 
 
 @cache
