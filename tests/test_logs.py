@@ -423,3 +423,29 @@ def test_output_cut_short_by_a_closed_pipe_ends_quietly(planned):
     proc.stdout.close()
     assert proc.wait(timeout=60) == 0
     assert proc.stderr.read() == b""
+
+
+def test_a_particle_stopped_at_a_joint_limit_is_logged_and_shown(tmp_path):
+    """Our sideways insertion at grasp.x ±1 cm: some candidate motions carry joint 5 to its
+    limit (a Franka's reflex). Those transitions log the particle's reason, `logs show`
+    prints it, and no accepted motion has one."""
+    import yaml
+
+    from bilba_dist.record.schemas import TOPICS
+    from tests.test_planner import _sideways
+
+    task = tmp_path / "sideways.yaml"
+    task.write_text(yaml.safe_dump(_sideways([0.55, 0, 0.45])))
+    log = tmp_path / "sideways.mcap"
+    args = ["plan", str(task), "-u", "grasp.x=1cm", "--workers", "0", "--log", str(log)]
+    result = run(*args, "--out", str(tmp_path / "plan.json"))
+    assert result.exit_code == 0, result.output
+    transitions = read_log(log).json("/transition")
+    stopped = [t for t in transitions if any("stopped" in p for p in t["after"])]
+    assert stopped and not any(t["accepted"] for t in stopped)
+    for t in stopped:
+        jsonschema.validate(t, TOPICS["/transition"])
+        assert t["count"] == 0  # a motion that stops a particle brings none in
+    shown = run("logs", "show", str(log), "--step", str(stopped[0]["index"]))
+    assert shown.exit_code == 0, shown.output
+    assert "stopped: joint 5 reached its lower limit (-2.8973 rad)" in shown.output

@@ -65,7 +65,8 @@ def show(log: Log, step: int) -> str:
     for i, (b, a) in enumerate(zip(t["before"], t["after"], strict=True)):
         before = " ".join(f"{1e3 * v:+7.1f}" for v in b["X_WM"]["xyz"])
         after = " ".join(f"{1e3 * v:+7.1f}" for v in a["X_WM"]["xyz"])
-        lines.append(f"{i:<9}{before:<27}{after:<27}{_contacts(a['contacts'])}")
+        shown = f"stopped: {a['stopped']}" if a.get("stopped") else _contacts(a["contacts"])
+        lines.append(f"{i:<9}{before:<27}{after:<27}{shown}")
     return "\n".join(lines)
 
 
