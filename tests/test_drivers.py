@@ -353,6 +353,26 @@ def test_the_libfranka_ramp_keeps_within_the_pose_generators_limits(default_plan
         assert np.allclose(sim, script, atol=1e-12)
 
 
+def test_a_plan_past_the_driven_arms_limits_still_exports_with_its_warnings(tmp_path):
+    """Our sideways insertion planned on the Panda starts with joint 5 past a Franka
+    Research 3's limit: export to franky warns (the robot would refuse it) and still writes
+    the script, its collision thresholds from the plan replayed on the Panda."""
+    from tests.test_planner import _sideways
+
+    task, plan_path = tmp_path / "sideways.yaml", tmp_path / "sideways.json"
+    task.write_text(yaml.safe_dump(_sideways([0.55, 0, 0.45])))
+    planned = run_cli("plan", str(task), "--workers", "0", "--no-log", "--out", str(plan_path))
+    assert planned.exit_code == 0, planned.output
+    out = tmp_path / "sideways-franky.py"
+    result = run_cli("export", str(plan_path), "--target", "franky", "--out", str(out))
+    assert result.exit_code == 0, result.output
+    assert "on a Franka Research 3, joint 5 is past its limits" in result.stderr
+    assert "the collision thresholds come from the plan replayed on the arm it was made for" in (
+        result.stderr
+    )
+    assert "COLLISION = " in out.read_text()
+
+
 def test_collision_thresholds_rise_only_where_the_plan_needs_it():
     from bilba_dist.plans.loads import Load, collision_thresholds, threshold_note
 

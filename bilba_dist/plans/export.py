@@ -24,6 +24,7 @@ from bilba_dist.errors import BilbaError
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.plans.file import PlanFile
 from bilba_dist.plans.loads import (
+    Load,
     Thresholds,
     collision_thresholds,
     friction_twins,
@@ -38,6 +39,7 @@ from bilba_dist.robot.drivers import (
     hand_to_ee,
     joint_limit_warnings,
 )
+from bilba_dist.task.loader import Task
 
 
 @dataclass(frozen=True)
@@ -99,21 +101,37 @@ def driven_motions(plan: PlanFile, export: Export | None) -> list[PlannedMotion]
 def with_thresholds(plan: PlanFile, export: Export) -> Export:
     """``export`` with the collision thresholds its plan needs: the plan replayed as the
     driver runs it (`bilba execute --driver`) on its planning particles at the verification
-    frictions, each motion's peak load kept (plans/loads.py)."""
-    from bilba_dist.belief.particles import initial_belief
+    frictions, each motion's peak load kept (plans/loads.py). Where the driver's arm cannot
+    reach the plan's start within its joint limits (already a warning), the loads are the
+    plan's as planned, on its own arm, and a warning says so."""
+    from bilba_dist.errors import TaskError
     from bilba_dist.task.loader import with_planner
+
+    warnings = list(export.warnings)
+    try:
+        loads = _replay_loads(with_planner(plan.task(), driver=export.driver.name), plan, export)
+    except TaskError:
+        loads = _replay_loads(plan.task(), plan, export)
+        warnings.append(
+            f"the start is past the {export.driver.name} arm's joint limits: the collision "
+            "thresholds come from the plan replayed on the arm it was made for"
+        )
+    thresholds = collision_thresholds(loads)
+    if thresholds.raised:
+        warnings.append(threshold_note(thresholds))
+    return replace(export, thresholds=thresholds, warnings=warnings)
+
+
+def _replay_loads(task: Task, plan: PlanFile, export: Export) -> list[Load]:
+    from bilba_dist.belief.particles import initial_belief
     from bilba_dist.workers.rollout_worker import RolloutWorker
 
-    task = with_planner(plan.task(), driver=export.driver.name)
     worker = RolloutWorker(task, "panda")
     try:
         particles = friction_twins(task, initial_belief(task))
-        loads = plan_loads(task, driven_motions(plan, export), particles, worker)
+        return plan_loads(task, driven_motions(plan, export), particles, worker)
     finally:
         worker.close()
-    thresholds = collision_thresholds(loads)
-    warnings = [*export.warnings, threshold_note(thresholds)] if thresholds.raised else []
-    return replace(export, thresholds=thresholds, warnings=warnings or export.warnings)
 
 
 def payload(plan: PlanFile) -> tuple[float, list[float], list[float]]:
