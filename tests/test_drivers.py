@@ -371,6 +371,10 @@ def test_a_plan_past_the_driven_arms_limits_still_exports_with_its_warnings(tmp_
         result.stderr
     )
     assert "COLLISION = " in out.read_text()
+    run = run_cli("execute", str(plan_path), "--driver", "franky")
+    assert run.exit_code == 2 and run.stderr.count("\n") == 1, run.output
+    assert "its start is past the joint limits of the Franka Research 3 that franky" in run.stderr
+    assert run.stderr.rstrip().endswith("plan again with --driver franky")
 
 
 def test_collision_thresholds_rise_only_where_the_plan_needs_it():

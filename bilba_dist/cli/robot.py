@@ -127,6 +127,7 @@ def execute(
     if driver is not None:
         exported = driver_motions(plan, DRIVERS[driver], ee_offset_of(plan, ee_offset))
         task = with_planner(task, driver=driver)  # the worker simulates as it runs
+        _check_start_within(task, plan_path, driver)
     motions = driven_motions(plan, exported)
     belief_particles = particles_for(task, extra)
     click.echo(
@@ -164,6 +165,22 @@ def execute(
         which = ", ".join(f"{i} ({describe(final.particles[i])})" for i in misses)
         click.echo(f"missed by  particle {which}")
         sys.exit(EXIT_MISSED)
+
+
+def _check_start_within(task: Task, plan_path: Path, driver: str) -> None:
+    """A plan whose start the driven arm cannot reach within its joint limits (a Panda plan
+    run as an FR3 driver runs it) is one line saying so, not the task file's advice."""
+    from bilba_dist.belief.start import start_joints
+    from bilba_dist.errors import TaskError
+
+    try:
+        start_joints(task)
+    except TaskError:
+        arm = " and ".join(DRIVERS[driver].arms)
+        raise BilbaError(
+            f"{plan_path}: its start is past the joint limits of the {arm} that {driver} "
+            f"drives, so it cannot run there; plan again with --driver {driver}"
+        ) from None
 
 
 def _backend(task: Task, gui: bool) -> "RolloutWorker":
