@@ -60,19 +60,15 @@ def joint_torque(
     scale = 1.0
     if w2 > limit * limit:  # rare: only far from the setpoint
         scale = limit / math.sqrt(w2)
-        cut = 1.0 - scale
-        for j in range(7):
-            acc = 0.0
-            for r in range(6):
-                acc += Jt[j, r] * w[r]
-            tau[j] -= cut * acc
-    for r in range(6):
-        tau[7 + r] = max(tau[7 + r], abs(w[r]) * scale)
-    for j in range(7):
+    for j in range(7):  # Jᵀ w: the clip's share of the torque, and the joint's load
         acc = 0.0
         for r in range(6):
             acc += Jt[j, r] * w[r]
+        if scale < 1.0:
+            tau[j] -= (1.0 - scale) * acc
         tau[13 + j] = max(tau[13 + j], abs(acc) * scale)
+    for r in range(6):
+        tau[7 + r] = max(tau[7 + r], abs(w[r]) * scale)
     for j in range(7):
         tau[20 + j] = min(tau[20 + j], x[j])
         tau[27 + j] = max(tau[27 + j], x[j])

@@ -17,7 +17,7 @@ import pybullet as p
 
 from bilba_dist.errors import UnreachableError
 from bilba_dist.robot.drivers import planning_arms
-from bilba_dist.robot.panda import ARM_JOINTS, LIMIT_MARGIN_RAD, TORQUE_LIMITS, PandaModel
+from bilba_dist.robot.panda import ARM_JOINTS, TORQUE_LIMITS, PandaModel
 from bilba_dist.rollout import Motion, ParticleState, RolloutResult
 from bilba_dist.task.loader import Task
 from bilba_dist.workers.control_step import joint_torque
@@ -174,14 +174,11 @@ class PandaSim(OwnsClient):
         """Why the real arm would have stopped: a joint that came within LIMIT_MARGIN_RAD of
         its limit (a Franka halts there with a joint-position-limit reflex; the simulated
         arm would rest on the stop and go on). None when every joint kept clear."""
-        for j in range(7):
-            for side, limit, reached in (
-                ("lower", self.model.lower[j], low[j] <= self.model.lower[j] + LIMIT_MARGIN_RAD),
-                ("upper", self.model.upper[j], high[j] >= self.model.upper[j] - LIMIT_MARGIN_RAD),
-            ):
-                if reached:
-                    return f"joint {j + 1} reached its {side} limit ({limit:.4f} rad)"
-        return None
+        hit = self.model.limit_reached(low, high)
+        if hit is None:
+            return None
+        joint, side, limit = hit
+        return f"joint {joint} reached its {side} limit ({limit:.4f} rad)"
 
     def _run(self, q0: np.ndarray, q_d: np.ndarray, motion: Motion) -> tuple[int, bool, np.ndarray]:
         """Step the controller until the motion has settled or timed out. Also returns the

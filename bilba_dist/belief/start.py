@@ -8,7 +8,7 @@ from bilba_dist.belief.particles import Particle
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import TaskError, UnreachableError
 from bilba_dist.robot.drivers import planning_arms
-from bilba_dist.robot.panda import LIMIT_MARGIN_RAD, Q_CENTRE, PandaModel
+from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import Task
 
@@ -50,10 +50,10 @@ def _start_joints(task: Task, arms: tuple[str, ...], first: np.ndarray) -> np.nd
         except UnreachableError as exc:
             nearest = min(nearest, exc.residual)
             continue
-        clear = (q > model.lower + LIMIT_MARGIN_RAD) & (q < model.upper - LIMIT_MARGIN_RAD)
-        if clear.all():
+        hit = model.limit_reached(q, q)
+        if hit is None:
             return q
-        at_limit = at_limit if at_limit is not None else int(np.flatnonzero(~clear)[0]) + 1
+        at_limit = at_limit if at_limit is not None else hit[0]
     xyz = ", ".join(f"{v:.4g}" for v in task.X_WG0.translation)
     if at_limit is not None:  # a real arm would stop with a reflex before the first motion
         raise TaskError(

@@ -45,8 +45,10 @@ class Load:
 def friction_twins(task: Task, particles: Sequence[Particle]) -> list[Particle]:
     """``particles`` at the task's friction and at ×(1 ∓ check_friction), as verification
     checks them (a task with friction as an uncertainty axis has its own spread already)."""
-    f = task.spec.planner.check_friction
-    if f <= 0 or task.spec.uncertainty.get("friction", 0.0) > 0:
+    from bilba_dist.planning.bilba import robust_friction
+
+    f = robust_friction(task)
+    if f == 0:
         return list(particles)
     return [
         make_particle(task, {**p.offsets, "friction": s}) for s in (-f, 0.0, f) for p in particles

@@ -19,11 +19,11 @@ FINGER_JOINTS = ("panda_finger_joint1", "panda_finger_joint2")
 HAND = "panda_hand"
 #: Torque limits of the seven arm joints [N·m] (Franka's datasheet; docs/reference-values.md).
 TORQUE_LIMITS = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
-#: A comfortable mid-range posture: the IK's joint-centring target.
 #: A joint this close to its limit has reached it: a Franka stops there with a reflex, so a
 #: simulated rollout that comes this close ends its particle's run, and a start posture
 #: keeps at least this far away [rad].
 LIMIT_MARGIN_RAD = 1e-3
+#: A comfortable mid-range posture: the IK's joint-centring target.
 Q_CENTRE = np.array([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, np.pi / 4])
 
 #: Joint position limits [rad] from Franka's robot specifications. The Panda URDF we load
@@ -86,6 +86,17 @@ class PandaModel:
         low, high = arm_limits(arms)
         self.lower = np.maximum(self.model.lowerPositionLimit, low)
         self.upper = np.minimum(self.model.upperPositionLimit, high)
+
+    def limit_reached(self, low: np.ndarray, high: np.ndarray) -> tuple[int, str, float] | None:
+        """The first joint whose range ``[low, high]`` (lowest and highest angle, or a
+        posture given twice) came within LIMIT_MARGIN_RAD of its limit: (joint 1–7, "lower"
+        or "upper", that limit [rad]); None when every joint kept clear."""
+        for j in range(7):
+            if low[j] <= self.lower[j] + LIMIT_MARGIN_RAD:
+                return j + 1, "lower", float(self.lower[j])
+            if high[j] >= self.upper[j] - LIMIT_MARGIN_RAD:
+                return j + 1, "upper", float(self.upper[j])
+        return None
 
     def _add_payload(self, mass: float, X_GM: pin.SE3, com_M: np.ndarray) -> None:
         frame = self.model.frames[self.hand]
