@@ -22,7 +22,11 @@ from typing import Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from bilba_dist.belief.particles import initial_belief
-from bilba_dist.belief.start import check_start_free
+from bilba_dist.belief.start import (
+    check_gripper_reaches_goal,
+    check_gripper_start,
+    check_start_free,
+)
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import Variant
 from bilba_dist.rollout import DynamicsModel
@@ -118,13 +122,16 @@ def load_jobs(path: Path) -> Batch:
     for task in spec.tasks:
         beside = path.parent / task
         where = str(beside) if beside.is_file() else task
-        for setting, bounds in spec.uncertainty.items():
+        for n, (setting, bounds) in enumerate(spec.uncertainty.items()):
             try:
                 loaded = load_task(where, bounds)
                 if spec.preset is not None:
                     loaded = with_preset(loaded, spec.preset)
                 tasks[(task, setting)] = loaded
                 check_start_free(loaded, initial_belief(loaded))
+                check_gripper_start(loaded, initial_belief(loaded))
+                if n == 0:  # the goal is the same in every setting
+                    check_gripper_reaches_goal(loaded)
             except BilbaError as exc:
                 raise BilbaError(f"{source}: task {task!r}, setting {setting!r}: {exc}") from None
     jobs = [

@@ -26,17 +26,14 @@ from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from scipy.spatial import HalfspaceIntersection
 
 from bilba_dist.errors import GeometryError
-from bilba_dist.geometry.piece import ConvexPiece, Part, convex_piece
+from bilba_dist.geometry.piece import URDF_MESH_MARGIN_M, ConvexPiece, Part, inset
 from bilba_dist.robot.panda import ARM_JOINTS, FINGER_JOINTS, panda_urdf
 
 PART_LINK = "manipuland"
 #: The arm's last moving link: the hand's fixed links are merged into it.
 FLANGE_LINK = "panda_link7"
-#: The collision margin PyBullet's URDF loader gives a convex mesh [m].
-URDF_MESH_MARGIN_M = 0.001
 
 
 def _origin(X: pin.SE3) -> str:
@@ -54,23 +51,6 @@ def write_obj(piece: ConvexPiece, path: Path) -> None:
         a, *rest = (i + 1 for i in face.vertices)  # OBJ counts from 1, counter-clockwise
         lines += [f"f {a} {b} {c}" for b, c in pairwise(rest)]
     path.write_text("\n".join(lines) + "\n")
-
-
-def inset(piece: ConvexPiece, depth: float) -> ConvexPiece:
-    """``piece`` with every face moved ``depth`` [m] inwards (a piece thinner than twice
-    that has nothing left: an error naming it)."""
-    normals = np.array([f.normal for f in piece.faces])
-    offsets = np.array([f.offset for f in piece.faces]) - depth
-    centre = piece.vertices.mean(axis=0)
-    if (normals @ centre - offsets).max() >= -1e-6:
-        raise GeometryError(
-            f"piece {piece.name!r} is too thin to simulate on the Panda model: its faces "
-            f"must be more than {2 * depth * 1000:g} mm apart"
-        )
-    corners = HalfspaceIntersection(np.column_stack([normals, -offsets]), centre)
-    return convex_piece(
-        piece.name, np.unique(corners.intersections.round(12), axis=0), pin.SE3.Identity()
-    )
 
 
 def part_collisions(part: Part, folder: Path) -> str:

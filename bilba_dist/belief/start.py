@@ -4,9 +4,11 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from bilba_dist.belief.particles import Particle
+from bilba_dist.belief.particles import Particle, make_particle
 from bilba_dist.belief.state import Belief
+from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.errors import TaskError, UnreachableError
+from bilba_dist.geometry.pose import rotation_key
 from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
@@ -15,6 +17,17 @@ from bilba_dist.task.loader import Task
 #: A part this far inside the environment at the start counts as penetrating [m] (resting
 #: contact in PyBullet sits ~1e-5 m deep; the C-obs is exact to 1e-9 m).
 START_CONTACT_TOL_M = 1e-4
+#: The gripper this far inside the environment counts as penetrating [m] (1 mm: the
+#: simulated hulls are rounded at their edges, the C-obs hulls here are not).
+GRIPPER_TOL_M = 1e-3
+#: Points drawn on the goal's C-obs region to look for a pose the gripper fits at (seeded).
+GOAL_SAMPLES = 256
+#: Steps [m] and how many, backing the part out of its goal to say how far short of it the
+#: gripper stops it.
+GOAL_BACK_STEP_M = 1e-3
+GOAL_BACK_STEPS = 300
+#: ... from this many of the goal poses, those where the gripper is least deep.
+GOAL_BACKED = 16
 
 
 #: Joint postures, drawn uniformly within the limits (seeded), that the start IK tries
@@ -91,8 +104,6 @@ def check_start_free(task: Task, particles: Sequence[Particle]) -> None:
     """Raise a TaskError naming the first particle whose part already penetrates the
     environment at the start pose, and how deep (from the C-obs slice at its rotation:
     the depth inside the deepest piece pair is the shortest move that frees it)."""
-    from bilba_dist.cspace.slice import CObsSlice
-
     for i, particle in enumerate(particles):
         X_OM = particle.X_OM(task.X_WG0)
         cobs = CObsSlice.build(task.environment, task.manipuland, X_OM.rotation)
@@ -106,3 +117,76 @@ def check_start_free(task: Task, particles: Sequence[Particle]) -> None:
                 f"inside the environment (pieces {pair.manip_piece} in {pair.env_piece}); "
                 "start the robot clear of the parts, or pass --allow-start-contact"
             )
+
+
+def _gripper_slice(task: Task, R_OH: np.ndarray) -> CObsSlice:
+    """C-obs of the gripper against the environment with the hand turned by ``R_OH`` in the
+    environment's frame: a point is a hand position there (the gripper: the hand, fingers
+    and flange, as the simulated arm collides with them)."""
+    from bilba_dist.robot.gripper import gripper_part  # imports trimesh (~0.8 s): only here
+
+    return CObsSlice.build(task.environment, gripper_part(), R_OH)
+
+
+def check_gripper_start(task: Task, particles: Sequence[Particle]) -> None:
+    """Raise a TaskError naming the first particle whose gripper starts inside the
+    environment (the hand is where the task says for every particle; the environment moves
+    with the particles' env offsets)."""
+    slices: dict[bytes, CObsSlice] = {}
+    for i, particle in enumerate(particles):
+        X_OH = particle.X_WO.inverse() * task.X_WG0
+        key = rotation_key(X_OH.rotation)
+        if key not in slices:
+            slices[key] = _gripper_slice(task, X_OH.rotation)
+        slack = slices[key].stack.slack(X_OH.translation)[0]
+        deepest = int(np.argmin(slack))
+        if slack[deepest] < -GRIPPER_TOL_M:
+            pair = slices[key].polytopes[deepest]
+            raise TaskError(
+                f"{task.source}: robot_start: the gripper starts {-slack[deepest] * 1000:.3g} "
+                f"mm inside the environment ({pair.manip_piece} in {pair.env_piece}, particle "
+                f"{i}); start the robot clear of the parts"
+            )
+
+
+def check_gripper_reaches_goal(task: Task) -> None:
+    """Raise a TaskError where, wherever the nominal part touches its goal, the gripper is
+    inside the environment: a part held too short for the depth of its hole, whose fingers
+    meet the rim before the part meets the floor. It says how far short of the goal the
+    gripper stops the part (at least: the simulated hull is a little larger). Nothing is
+    said when the goal is missing from the slice (the mode graph says that)."""
+    nominal = make_particle(task, {})
+    X_OM = nominal.X_OM(task.X_WG0)
+    part = CObsSlice.build(task.environment, task.manipuland, X_OM.rotation)
+    on_goal = part.sample_mode(task.goal, GOAL_SAMPLES, np.random.default_rng(0))
+    if len(on_goal) == 0:
+        return
+    X_MH = nominal.X_GM.inverse()
+    hand = _gripper_slice(task, X_OM.rotation @ X_MH.rotation)
+    on_goal = on_goal + X_OM.rotation @ X_MH.translation  # the hand's positions
+    depth = -hand.stack.slack(on_goal).min(axis=1)
+    if depth.min() <= GRIPPER_TOL_M:
+        return
+    # How far short of the goal: back the hand out along the goal's C-obs normal (the way
+    # the part came in) until the gripper is clear, from the goal poses where it is least deep.
+    normal = part.mode_triangles(task.goal)[1].mean(axis=0)
+    normal /= np.linalg.norm(normal)
+    nearest = on_goal[np.argsort(depth)[:GOAL_BACKED]]
+    back = np.arange(1, GOAL_BACK_STEPS + 1) * GOAL_BACK_STEP_M
+    path = (nearest[:, None, :] + back[None, :, None] * normal).reshape(-1, 3)
+    free = (hand.stack.slack(path) >= -GRIPPER_TOL_M).all(axis=1).reshape(len(nearest), -1)
+    short = np.where(free.any(axis=1), free.argmax(axis=1), len(back))
+    best = int(np.argmin(short))
+    pair = hand.polytopes[int(np.argmin(hand.stack.slack(nearest[best])[0]))]
+    how_far = (
+        f"at least {back[short[best]] * 1000:.0f} mm"
+        if short[best] < len(back)
+        else f"over {back[-1] * 1000:.0f} mm"
+    )
+    env, manip = task.goal
+    raise TaskError(
+        f"{task.source}: goal: the gripper meets the environment before the part reaches "
+        f"{manip} on {env} ({pair.manip_piece} on {pair.env_piece}): it stops the part "
+        f"{how_far} short of it; hold the part further out of the hand (grasp) by more than "
+        "that, or leave the gripper room"
+    )

@@ -5,7 +5,7 @@ from pathlib import Path
 import click
 
 from bilba_dist.belief.particles import initial_belief
-from bilba_dist.belief.start import start_joints
+from bilba_dist.belief.start import check_gripper_reaches_goal, check_gripper_start, start_joints
 from bilba_dist.cli.errors import user_errors
 from bilba_dist.cli.options import split_uncertainty, task_argument, uncertainty_option
 from bilba_dist.cli.outputs import refuse_overwriting, task_file, write_output
@@ -44,6 +44,11 @@ def graph(task: str, uncertainty: tuple[str, ...], dot: Path | None) -> None:
         start_joints(loaded)
     except TaskError as exc:
         click.echo(f"bilba: warning: {exc} (bilba plan refuses this start)", err=True)
+    try:  # ... and the gripper fit where the part goes
+        check_gripper_start(loaded, particles)
+        check_gripper_reaches_goal(loaded)
+    except TaskError as exc:
+        click.echo(f"bilba: warning: {exc} (bilba plan refuses this task)", err=True)
     if dot is not None:
         write_output(dot, mode_graph.to_dot())
         click.echo(f"wrote {dot}")

@@ -12,6 +12,7 @@ from functools import cached_property
 
 import numpy as np
 import pinocchio as pin
+from scipy.spatial import HalfspaceIntersection
 
 from bilba_dist.errors import GeometryError, listed
 from bilba_dist.geometry.hull import convex_hull, face_edges, planar_faces
@@ -225,3 +226,25 @@ class Part:
             f"part {self.name!r} has no piece {piece_name!r} (faces are PIECE/FACE); "
             f"pieces: {known}"
         )
+
+
+#: The collision margin PyBullet's URDF loader gives a convex mesh [m]: the shape collides
+#: as its hull grown by this much (rounded at edges and corners).
+URDF_MESH_MARGIN_M = 0.001
+
+
+def inset(piece: ConvexPiece, depth: float) -> ConvexPiece:
+    """``piece`` with every face moved ``depth`` [m] inwards (outwards where negative; a
+    piece thinner than twice that has nothing left: an error naming it)."""
+    normals = np.array([f.normal for f in piece.faces])
+    offsets = np.array([f.offset for f in piece.faces]) - depth
+    centre = piece.vertices.mean(axis=0)
+    if (normals @ centre - offsets).max() >= -1e-6:
+        raise GeometryError(
+            f"piece {piece.name!r} is too thin to simulate on the Panda model: its faces "
+            f"must be more than {2 * depth * 1000:g} mm apart"
+        )
+    corners = HalfspaceIntersection(np.column_stack([normals, -offsets]), centre)
+    return convex_piece(
+        piece.name, np.unique(corners.intersections.round(12), axis=0), pin.SE3.Identity()
+    )

@@ -1,0 +1,96 @@
+"""The gripper must fit too: a part held too short for its hole is refused in one line that
+says how far short the fingers stop it, and the simulated arm stops it there."""
+
+import re
+import time
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+
+from bilba_dist import RolloutWorker, load_task, plan
+from bilba_dist.belief.particles import initial_belief, make_particle
+from bilba_dist.belief.start import check_gripper_reaches_goal, check_gripper_start
+from bilba_dist.errors import TaskError
+from bilba_dist.plans.replay import replay
+from bilba_dist.planning.result import PlannedMotion
+from bilba_dist.planning.stiffness import VERY_STIFF
+from bilba_dist.task.loader import builtin_tasks
+from tests.test_hostile_input import assert_one_line_exit_2
+from tests.test_task_files import run_cli
+
+SHORT = "tests/data/chamfer-tip.yaml"  # held 125 mm below the hand: ~30 mm too short
+
+
+def _held_at(z: float) -> dict:
+    data = yaml.safe_load(open(SHORT).read())
+    data["grasp"]["xyz"] = [0, 0, z]
+    return data
+
+
+def _shortfall_mm(task) -> float:
+    with pytest.raises(TaskError) as caught:
+        check_gripper_reaches_goal(task)
+    found = re.search(r"stops the part at least (\d+) mm short", str(caught.value))
+    assert found, str(caught.value)
+    return float(found.group(1))
+
+
+def test_a_part_held_too_short_for_its_hole_is_refused_with_how_far():
+    assert 25 <= _shortfall_mm(load_task(SHORT)) <= 32
+    assert 2 <= _shortfall_mm(load_task(_held_at(0.150))) <= 6  # 25 mm further out
+    check_gripper_reaches_goal(load_task(_held_at(0.160)))  # 35 mm further: it fits
+
+
+def test_the_simulated_arm_stops_the_part_where_the_check_says():
+    """Pressed straight down towards the floor, stiffly: the fingers land on the rim and the
+    part stays at least the reported shortfall above the floor; held 35 mm further out it
+    reaches the floor."""
+    for data, reaches in ((SHORT, False), (_held_at(0.160), True)):
+        task = load_task(data, [])
+        nominal = make_particle(task, {})
+        G_d = pin.SE3(task.X_WG0.rotation, task.X_WG0.translation - [0, 0, 0.2])
+        motion = PlannedMotion(VERY_STIFF, G_d, np.zeros(7), 5.0, task.goal, 0.0)
+        end = replay(task, [motion], [nominal], RolloutWorker(task))
+        floor_top = task.X_WO.translation[2] + 0.02
+        above_mm = (end.states[0].X_WM.translation[2] - floor_top) * 1000
+        assert (task.goal in end.contacts[0]) is reaches, (above_mm, end.contacts[0])
+        if not reaches:
+            assert above_mm >= _shortfall_mm(task) - 0.5, above_mm
+
+
+def test_the_built_in_tasks_and_examples_fit_their_gripper():
+    for path in [*builtin_tasks().values(), "examples/round-peg/round-peg.yaml"]:
+        task = load_task(str(path))
+        check_gripper_start(task, initial_belief(task))
+        check_gripper_reaches_goal(task)
+
+
+def test_a_gripper_that_starts_inside_the_environment_is_refused():
+    """A shelf at the hand's height beside the hole: the part starts clear, the hand not."""
+    data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+    shelf = {"name": "shelf", "box": {"size": [0.3, 0.3, 0.02]}, "pose": {"xyz": [0, 0, 0.32]}}
+    data["environment"]["pieces"].append(shelf)
+    task = load_task(data, ["env.y=1cm"])
+    with pytest.raises(TaskError, match=r"the gripper starts [\d.]+ mm inside the environment"):
+        check_gripper_start(task, initial_belief(task))
+
+
+def test_bilba_plan_refuses_a_part_held_too_short_in_one_line(tmp_path):
+    out, log = tmp_path / "p.json", tmp_path / "l.mcap"
+    start = time.perf_counter()
+    result = run_cli("plan", SHORT, "--workers", "0", "--out", str(out), "--log", str(log))
+    assert_one_line_exit_2(result, "the gripper meets the environment", time.perf_counter() - start)
+    assert not out.exists() and not log.exists()
+    graph = run_cli("graph", SHORT)  # graph shows the modes and warns
+    assert graph.exit_code == 0 and "warning:" in graph.stderr and "short of it" in graph.stderr
+
+
+@pytest.mark.slow
+def test_the_same_part_held_further_out_plans_with_the_defaults():
+    """The chamfered tip funnels ±5 mm into 1 mm of clearance (14 s, 389 rollouts)."""
+    task = load_task(_held_at(0.156))
+    result = plan(task, RolloutWorker(task), "bilba-variable", seed=0, timeout_s=240)
+    assert result.success, result.reason
+    assert result.verification is not None and result.verification.passed
