@@ -3,6 +3,7 @@ says how far short the fingers stop it, and the simulated arm stops it there."""
 
 import re
 import time
+from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -13,19 +14,21 @@ from bilba_dist import RolloutWorker, load_task, plan
 from bilba_dist.belief.particles import initial_belief, make_particle
 from bilba_dist.belief.start import check_gripper_reaches_goal, check_gripper_start
 from bilba_dist.errors import TaskError
-from bilba_dist.plans.replay import replay
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.planning.stiffness import VERY_STIFF
+from bilba_dist.plans.replay import replay
 from bilba_dist.task.loader import builtin_tasks
 from tests.test_hostile_input import assert_one_line_exit_2
 from tests.test_task_files import run_cli
 
-SHORT = "tests/data/chamfer-tip.yaml"  # held 125 mm below the hand: ~30 mm too short
+SHORT = "tests/data/chamfer-tip.yaml"  # held 125 mm below the hand: ~50 mm too short
 
 
 def _held_at(z: float) -> dict:
-    data = yaml.safe_load(open(SHORT).read())
+    """The task with the peg held ``z`` below the hand, its tip starting where it did."""
+    data = yaml.safe_load(Path(SHORT).read_text())
     data["grasp"]["xyz"] = [0, 0, z]
+    data["robot_start"]["gripper"]["xyz"][2] += z - 0.125
     return data
 
 
@@ -38,21 +41,26 @@ def _shortfall_mm(task) -> float:
 
 
 def test_a_part_held_too_short_for_its_hole_is_refused_with_how_far():
-    assert 25 <= _shortfall_mm(load_task(SHORT)) <= 32
-    assert 2 <= _shortfall_mm(load_task(_held_at(0.150))) <= 6  # 25 mm further out
-    check_gripper_reaches_goal(load_task(_held_at(0.160)))  # 35 mm further: it fits
+    assert 44 <= _shortfall_mm(load_task(SHORT)) <= 52
+    assert 14 <= _shortfall_mm(load_task(_held_at(0.156))) <= 20  # 31 mm further out
+    check_gripper_reaches_goal(load_task(_held_at(0.180)))  # 55 mm further: it fits
 
 
 def test_the_simulated_arm_stops_the_part_where_the_check_says():
     """Pressed straight down towards the floor, stiffly: the fingers land on the rim and the
-    part stays at least the reported shortfall above the floor; held 35 mm further out it
+    part stays at least the reported shortfall above the floor; held 55 mm further out it
     reaches the floor."""
-    for data, reaches in ((SHORT, False), (_held_at(0.160), True)):
+    for data, reaches in ((SHORT, False), (_held_at(0.156), False), (_held_at(0.180), True)):
         task = load_task(data, [])
         nominal = make_particle(task, {})
-        G_d = pin.SE3(task.X_WG0.rotation, task.X_WG0.translation - [0, 0, 0.2])
-        motion = PlannedMotion(VERY_STIFF, G_d, np.zeros(7), 5.0, task.goal, 0.0)
-        end = replay(task, [motion], [nominal], RolloutWorker(task))
+        # the tip from 135 mm above the block's base to 90 (over the hole), then to 0 (2 cm
+        # below the floor): two short moves, each close to a straight line
+        motions = [
+            PlannedMotion(VERY_STIFF, pin.SE3(task.X_WG0.rotation, task.X_WG0.translation
+                                              - [0, 0, drop]), np.zeros(7), 5.0, task.goal, 0.0)
+            for drop in (0.045, 0.135)
+        ]  # fmt: skip
+        end = replay(task, motions, [nominal], RolloutWorker(task))
         floor_top = task.X_WO.translation[2] + 0.02
         above_mm = (end.states[0].X_WM.translation[2] - floor_top) * 1000
         assert (task.goal in end.contacts[0]) is reaches, (above_mm, end.contacts[0])
@@ -89,8 +97,34 @@ def test_bilba_plan_refuses_a_part_held_too_short_in_one_line(tmp_path):
 
 @pytest.mark.slow
 def test_the_same_part_held_further_out_plans_with_the_defaults():
-    """The chamfered tip funnels ±5 mm into 1 mm of clearance (14 s, 389 rollouts)."""
-    task = load_task(_held_at(0.156))
+    """The chamfered tip funnels ±5 mm into 1 mm of clearance."""
+    task = load_task(_held_at(0.180))
     result = plan(task, RolloutWorker(task), "bilba-variable", seed=0, timeout_s=240)
     assert result.success, result.reason
     assert result.verification is not None and result.verification.passed
+
+
+def test_the_fingers_close_on_the_part_where_it_is_between_them():
+    from bilba_dist.record.foxglove import SceneMessages
+    from bilba_dist.robot.gripper import FINGER_TRAVEL_M, finger_opening
+
+    task = load_task(SHORT)
+    assert finger_opening(task.manipuland, task.X_GM) == pytest.approx(0.020)  # 40 mm peg
+    turned = task.X_GM * pin.SE3(pin.rpy.rpyToMatrix(0, 0, np.pi / 4), np.zeros(3))
+    assert finger_opening(task.manipuland, turned) == pytest.approx(0.020 * np.sqrt(2))
+    below = pin.SE3(task.X_GM.rotation, np.array([0, 0, 0.25]))  # the part past the fingertips
+    assert finger_opening(task.manipuland, below) == 0.0
+    wide = yaml.safe_load(Path(SHORT).read_text())
+    wide["manipuland"]["pieces"] = [{"name": "slab", "box": {"size": [0.05, 0.1, 0.12]},
+                                     "pose": {"xyz": [0, 0, 0.06]}}]  # fmt: skip
+    wide["goal"]["manip"] = "slab/-z"
+    wide_task = load_task(wide)
+    assert finger_opening(wide_task.manipuland, wide_task.X_GM) == FINGER_TRAVEL_M  # 80 mm most
+    # the log's scene draws them there: the finger frames 2 × 20 mm apart
+    scene = SceneMessages(task.manipuland, task.environment)
+    frames = {
+        tf["child_frame_id"]: np.array([tf["translation"][k] for k in "xyz"])
+        for tf in scene.robot_transforms(0, np.zeros(7), 0, task.X_GM)
+    }
+    apart = np.linalg.norm(frames["panda_0/leftfinger"] - frames["panda_0/rightfinger"])
+    assert apart == pytest.approx(0.040, abs=1e-9)

@@ -29,6 +29,7 @@ import pinocchio as pin
 
 from bilba_dist.errors import GeometryError
 from bilba_dist.geometry.piece import URDF_MESH_MARGIN_M, ConvexPiece, Part, inset
+from bilba_dist.robot.gripper import finger_opening
 from bilba_dist.robot.panda import ARM_JOINTS, FINGER_JOINTS, panda_urdf
 
 PART_LINK = "manipuland"
@@ -88,8 +89,7 @@ def panda_with_part(
     text = source.read_text()
     text = re.sub(r"<visual>.*?</visual>", "", text, flags=re.DOTALL)  # DIRECT: never drawn
     text = re.sub(r'filename="(package://)?meshes/', f'filename="{source.parent}/meshes/', text)
-    for joint in FINGER_JOINTS:
-        text = re.sub(rf'(<joint name="{joint}" type=)"prismatic"', r'\1"fixed"', text)
+    text = _fingers_fixed(text, finger_opening(part, X_GM))
     if limits is not None:
         text = _with_joint_limits(text, *limits)
     centre = part.centre()
@@ -109,6 +109,27 @@ def panda_with_part(
     path = folder / "panda_with_part.urdf"
     path.write_text(text)
     return path
+
+
+def _fingers_fixed(text: str, opening: float) -> str:
+    """``text`` with the finger joints made fixed and each finger's collision shape moved
+    ``opening`` [m] along its joint's axis, where it closes on the part. Only the shapes
+    move: the fingers' mass stays where the URDF puts it, so the arm's dynamics are those of
+    every plan before the fingers opened (a 0.1 kg finger 15 mm aside changes rollouts)."""
+    root = ET.fromstring(text)
+    links = {link.get("name"): link for link in root.findall("link")}
+    for joint in root.findall("joint"):
+        if joint.get("name") not in FINGER_JOINTS:
+            continue
+        joint.set("type", "fixed")
+        axis = np.array(_linked(joint, "axis", "xyz").split(), float)
+        for collision in links[_linked(joint, "child")].findall("collision"):
+            origin = collision.find("origin")
+            if origin is None:
+                origin = ET.SubElement(collision, "origin", {"rpy": "0 0 0", "xyz": "0 0 0"})
+            xyz = np.array(origin.get("xyz", "0 0 0").split(), float) + opening * axis
+            origin.set("xyz", " ".join(f"{v:.17g}" for v in xyz))
+    return ET.tostring(root, encoding="unicode")
 
 
 def _with_joint_limits(text: str, lower: np.ndarray, upper: np.ndarray) -> str:

@@ -121,27 +121,33 @@ def check_start_free(task: Task, particles: Sequence[Particle]) -> None:
 
 def _gripper_slice(task: Task, R_OH: np.ndarray) -> CObsSlice:
     """C-obs of the gripper against the environment with the hand turned by ``R_OH`` in the
-    environment's frame: a point is a hand position there (the gripper: the hand, fingers
-    and flange, as the simulated arm collides with them)."""
-    from bilba_dist.robot.gripper import gripper_part  # imports trimesh (~0.8 s): only here
+    environment's frame, the fingers where they close on the nominal part: a point is a hand
+    position there (the gripper: the hand, fingers and flange, as the simulated arm collides
+    with them; each particle's fingers differ from the nominal's by its offsets' share of the
+    part's width, a millimetre or two)."""
+    from bilba_dist.robot.gripper import finger_opening, gripper_part
 
-    return CObsSlice.build(task.environment, gripper_part(), R_OH)
+    key = (task.hash, rotation_key(R_OH))
+    if key not in _GRIPPER_SLICES:
+        opening = finger_opening(task.manipuland, make_particle(task, {}).X_GM)
+        _GRIPPER_SLICES[key] = CObsSlice.build(task.environment, gripper_part(opening), R_OH)
+    return _GRIPPER_SLICES[key]
+
+
+_GRIPPER_SLICES: dict[tuple[str, bytes], CObsSlice] = {}
 
 
 def check_gripper_start(task: Task, particles: Sequence[Particle]) -> None:
     """Raise a TaskError naming the first particle whose gripper starts inside the
     environment (the hand is where the task says for every particle; the environment moves
     with the particles' env offsets)."""
-    slices: dict[bytes, CObsSlice] = {}
     for i, particle in enumerate(particles):
         X_OH = particle.X_WO.inverse() * task.X_WG0
-        key = rotation_key(X_OH.rotation)
-        if key not in slices:
-            slices[key] = _gripper_slice(task, X_OH.rotation)
-        slack = slices[key].stack.slack(X_OH.translation)[0]
+        hand = _gripper_slice(task, X_OH.rotation)
+        slack = hand.stack.slack(X_OH.translation)[0]
         deepest = int(np.argmin(slack))
         if slack[deepest] < -GRIPPER_TOL_M:
-            pair = slices[key].polytopes[deepest]
+            pair = hand.polytopes[deepest]
             raise TaskError(
                 f"{task.source}: robot_start: the gripper starts {-slack[deepest] * 1000:.3g} "
                 f"mm inside the environment ({pair.manip_piece} in {pair.env_piece}, particle "

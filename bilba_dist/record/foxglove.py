@@ -19,6 +19,7 @@ import pinocchio as pin
 
 from bilba_dist.geometry.piece import Part
 from bilba_dist.record.panda_scene import panda_bodies, panda_shapes
+from bilba_dist.robot.gripper import finger_opening
 
 
 def _official(name: str) -> dict[str, Any]:
@@ -98,6 +99,8 @@ class SceneMessages:
 
     def __init__(self, manipuland: Part, environment: Part, robot: bool = True) -> None:
         self._meshes = {"part": triangles(manipuland), "env": triangles(environment)}
+        self._manipuland = manipuland
+        self._openings: dict[bytes, float] = {}  # finger opening per grasp
         self._robot = (
             [
                 (name, [_xyz(np.round(v, 4)) for v in vertices], [int(i) for i in faces.ravel()])
@@ -124,14 +127,20 @@ class SceneMessages:
                 )
         return {"deletions": [], "entities": entities}
 
-    def robot_transforms(self, i: int, q: np.ndarray, ns: int) -> list[dict[str, Any]]:
-        """Particle ``i``'s arm bodies at joint angles ``q`` (none without the robot)."""
+    def robot_transforms(
+        self, i: int, q: np.ndarray, ns: int, X_GM: pin.SE3
+    ) -> list[dict[str, Any]]:
+        """Particle ``i``'s arm bodies at joint angles ``q``, its fingers where they close on
+        the part held at ``X_GM`` (none without the robot)."""
         if not self._robot:
             return []
+        key = X_GM.homogeneous.tobytes()
+        if key not in self._openings:
+            self._openings[key] = finger_opening(self._manipuland, X_GM)
         bodies = panda_bodies()
         return [
             self.transform(f"panda_{i}/{name}", X, ns)
-            for name, X in zip(bodies.names, bodies.poses(q), strict=True)
+            for name, X in zip(bodies.names, bodies.poses(q, self._openings[key]), strict=True)
         ]
 
     @staticmethod

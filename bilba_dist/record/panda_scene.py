@@ -4,7 +4,8 @@ triangle list, placed per particle from that particle's joint angles.
 The shapes are the hulls of the URDF's collision meshes, cut down to at most
 ``MAX_VERTICES`` vertices each (farthest-point sampling, deterministic) so that a scene with
 every particle's arm stays a few tens of kB; they show where the arm is, not its exact surface.
-The fingers sit at their URDF zero, where the rollout model fixes them.
+The fingers sit where they close on the part, where the rollout model fixes them
+(``finger_opening``).
 """
 
 import os
@@ -59,10 +60,12 @@ class PandaBodies:
             shapes.append((np.asarray(hull.vertices), np.asarray(hull.faces)))
         return shapes
 
-    def poses(self, q_arm: np.ndarray) -> list[pin.SE3]:
-        """Each body's pose in the world (the robot base) at the seven arm joint angles."""
+    def poses(self, q_arm: np.ndarray, opening: float = 0.0) -> list[pin.SE3]:
+        """Each body's pose in the world (the robot base) at the seven arm joint angles, each
+        finger ``opening`` [m] from the centre."""
         q = pin.neutral(self.model)
         q[:7] = q_arm
+        q[7:9] = opening  # the two finger joints
         pin.forwardKinematics(self.model, self.data, q)
         pin.updateGeometryPlacements(self.model, self.data, self.geometry, self.geometry_data)
         return [pin.SE3(X) for X in self.geometry_data.oMg]

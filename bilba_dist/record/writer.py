@@ -168,9 +168,9 @@ class LogWriter:
         self.write("/scene", self._scene.scene(len(belief), now), now)
         for i, particle in enumerate(belief.particles):
             self.write("/tf", self._scene.transform(f"env_{i}", particle.X_WO, now), now)
-        for i, state in enumerate(belief.states):
+        for i, (particle, state) in enumerate(zip(belief.particles, belief.states, strict=True)):
             self.write("/tf", self._scene.transform(f"part_{i}", state.X_WM, now), now)
-            for tf in self._scene.robot_transforms(i, state.q, now):
+            for tf in self._scene.robot_transforms(i, state.q, now, particle.X_GM):
                 self.write("/tf", tf, now)
 
     def gp_round(
