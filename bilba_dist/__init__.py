@@ -22,6 +22,7 @@ _EXPORTS = {
     "load_task": "bilba_dist.task.loader",
     "Task": "bilba_dist.task.loader",
     "TaskSpec": "bilba_dist.task.schema",
+    "check_task": "bilba_dist.belief.start",
     # planning
     "plan": "bilba_dist.planning.bilba",
     "PLANNERS": "bilba_dist.planning.bilba",
@@ -66,6 +67,7 @@ __all__ = [
     "TaskSpec",
     "Validation",
     "__version__",
+    "check_task",
     "dumps",
     "load_task",
     "plan",

@@ -85,6 +85,15 @@ def test_a_gripper_that_starts_inside_the_environment_is_refused():
         check_gripper_start(task, initial_belief(task))
 
 
+def test_check_task_is_what_bilba_plan_checks():
+    from bilba_dist import check_task
+
+    with pytest.raises(TaskError, match="the gripper meets the environment"):
+        check_task(load_task(SHORT))
+    check_task(load_task("peg-in-hole"))
+    check_task(load_task(_held_at(0.180)))
+
+
 def test_bilba_plan_refuses_a_part_held_too_short_in_one_line(tmp_path):
     out, log = tmp_path / "p.json", tmp_path / "l.mcap"
     start = time.perf_counter()

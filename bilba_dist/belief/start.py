@@ -4,7 +4,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from bilba_dist.belief.particles import Particle, make_particle
+from bilba_dist.belief.particles import Particle, initial_belief, make_particle
 from bilba_dist.belief.state import Belief
 from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.errors import TaskError, UnreachableError
@@ -196,3 +196,16 @@ def check_gripper_reaches_goal(task: Task) -> None:
         f"{how_far} short of it; hold the part further out of the hand (grasp) by more than "
         "that, or leave the gripper room"
     )
+
+
+def check_task(task: Task, allow_start_contact: bool = False) -> None:
+    """What ``bilba plan`` checks before it plans, each a TaskError of one line: the start
+    within reach of the arm (``start_joints``), every particle's part and gripper clear of
+    the environment there (unless ``allow_start_contact``), and the gripper clear where the
+    part meets its goal."""
+    start_joints(task)
+    if not allow_start_contact:
+        particles = initial_belief(task)
+        check_start_free(task, particles)
+        check_gripper_start(task, particles)
+    check_gripper_reaches_goal(task)

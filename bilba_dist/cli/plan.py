@@ -8,13 +8,7 @@ from pathlib import Path
 
 import click
 
-from bilba_dist.belief.particles import initial_belief
-from bilba_dist.belief.start import (
-    check_gripper_reaches_goal,
-    check_gripper_start,
-    check_start_free,
-    start_joints,
-)
+from bilba_dist.belief.start import check_task
 from bilba_dist.cli.errors import EXIT_INTERRUPTED, user_errors
 from bilba_dist.cli.options import (
     SEED,
@@ -136,11 +130,7 @@ def plan_command(
         loaded = with_preset(loaded, preset)
     if driver is not None:
         loaded = with_planner(loaded, driver=driver)
-    start_joints(loaded)  # a start out of reach: one line before planning
-    if not allow_start_contact:
-        check_start_free(loaded, initial_belief(loaded))
-        check_gripper_start(loaded, initial_belief(loaded))
-    check_gripper_reaches_goal(loaded)  # fingers that meet the rim first: one line, not a search
+    check_task(loaded, allow_start_contact)  # one line before planning, not a fruitless search
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"
