@@ -113,9 +113,9 @@ def test_the_same_part_held_further_out_plans_with_the_defaults():
     assert result.verification is not None and result.verification.passed
 
 
-def test_the_fingers_close_on_the_part_where_it_is_between_them():
+def test_the_fingers_close_on_the_part_where_it_is_between_them(tmp_path):
     from bilba_dist.record.foxglove import SceneMessages
-    from bilba_dist.robot.gripper import FINGER_TRAVEL_M, finger_opening
+    from bilba_dist.robot.gripper import FINGER_TRAVEL_M, finger_opening, too_wide
 
     task = load_task(SHORT)
     assert finger_opening(task.manipuland, task.X_GM) == pytest.approx(0.020)  # 40 mm peg
@@ -129,6 +129,12 @@ def test_the_fingers_close_on_the_part_where_it_is_between_them():
     wide["goal"]["manip"] = "slab/-z"
     wide_task = load_task(wide)
     assert finger_opening(wide_task.manipuland, wide_task.X_GM) == FINGER_TRAVEL_M  # 80 mm most
+    assert "the part is 100 mm across" in str(too_wide(wide_task.manipuland, wide_task.X_GM))
+    assert too_wide(task.manipuland, task.X_GM) is None
+    (tmp_path / "wide.yaml").write_text(yaml.safe_dump(wide))
+    planned = run_cli("plan", str(tmp_path / "wide.yaml"), "--workers", "0", "--no-log",
+                      "--out", str(tmp_path / "p.json"), "--timeout", "5")  # fmt: skip
+    assert planned.exit_code in (0, 1) and "where the Franka Hand opens 80 mm" in planned.stderr
     # the log's scene draws them there: the finger frames 2 × 20 mm apart
     scene = SceneMessages(task.manipuland, task.environment)
     frames = {

@@ -12,6 +12,7 @@ from bilba_dist.cli.outputs import refuse_overwriting, task_file, write_output
 from bilba_dist.errors import TaskError
 from bilba_dist.geometry.contact import FREE
 from bilba_dist.modes.schedule import SliceCache, belief_graph
+from bilba_dist.robot.gripper import too_wide
 from bilba_dist.task.loader import load_task
 
 
@@ -49,6 +50,8 @@ def graph(task: str, uncertainty: tuple[str, ...], dot: Path | None) -> None:
         check_gripper_reaches_goal(loaded)
     except TaskError as exc:
         click.echo(f"bilba: warning: {exc} (bilba plan refuses this task)", err=True)
+    if wide := too_wide(loaded.manipuland, loaded.X_GM):
+        click.echo(f"bilba: warning: {wide}", err=True)
     if dot is not None:
         write_output(dot, mode_graph.to_dot())
         click.echo(f"wrote {dot}")

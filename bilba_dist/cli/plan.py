@@ -27,6 +27,7 @@ from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.robot.drivers import DRIVER_NAMES
+from bilba_dist.robot.gripper import too_wide
 from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
 from bilba_dist.task.schema import PRESETS
@@ -131,6 +132,8 @@ def plan_command(
     if driver is not None:
         loaded = with_planner(loaded, driver=driver)
     check_task(loaded, allow_start_contact)  # one line before planning, not a fruitless search
+    if wide := too_wide(loaded.manipuland, loaded.X_GM):
+        click.echo(f"bilba: warning: {wide}", err=True)
     out = out or Path("plans") / f"{loaded.name}-{planner}-s{seed}.json"
     stamp = time.strftime("%Y%m%d-%H%M%S")
     log_path = log_path or Path("logs") / f"{loaded.name}-{planner}-s{seed}-{stamp}.mcap"

@@ -33,8 +33,14 @@ FINGER_REACH_M = (0.0584, 0.1122)
 
 def finger_opening(part: Part, X_GM: pin.SE3) -> float:
     """How far each finger stands from the centre when the hand holds ``part`` at ``X_GM``
-    [m]: half the part's width along the hand's y (the fingers' axis) where the fingers
-    reach, up to FINGER_TRAVEL_M; 0 where the part is not between them."""
+    [m]: ``grasp_reach``, up to FINGER_TRAVEL_M."""
+    return min(grasp_reach(part, X_GM), FINGER_TRAVEL_M)
+
+
+def grasp_reach(part: Part, X_GM: pin.SE3) -> float:
+    """How far from the centre the part reaches along the hand's y (the fingers' axis)
+    where the fingers are [m]: where the fingers close on it (the farther side: they move
+    together); 0 where the part is not between them."""
     low, high = np.inf, -np.inf
     for piece in part.pieces:
         A = np.array([f.normal for f in piece.faces]) @ X_GM.rotation.T  # hand frame
@@ -50,7 +56,22 @@ def finger_opening(part: Part, X_GM: pin.SE3) -> float:
                 low, high = min(low, found.x[1]), max(high, found.x[1])
     if low > high:
         return 0.0
-    return float(min(max(abs(low), abs(high)), FINGER_TRAVEL_M))
+    return float(max(abs(low), abs(high)))
+
+
+def too_wide(part: Part, X_GM: pin.SE3) -> str | None:
+    """A warning where the Franka Hand cannot open around the part as it is held, else
+    None: the simulation then puts each finger at its 40 mm, inside the part."""
+    reach = grasp_reach(part, X_GM)
+    if reach <= FINGER_TRAVEL_M:
+        return None
+    opens = 2 * FINGER_TRAVEL_M * 1000
+    return (
+        f"the part is {2 * reach * 1000:.0f} mm across between the fingers (from the hand's "
+        f"centre, the farther side doubled) where the Franka Hand opens {opens:.0f} mm; "
+        "the simulation puts the fingers at their widest, inside the part: hold it by a "
+        "narrower side (turn the grasp about the hand's z)"
+    )
 
 
 @lru_cache(maxsize=1)
