@@ -67,6 +67,10 @@ def motions(folder: Path, record: dict) -> list:
             "name: a\ntasks: [peg-in-hole]\nuncertainty: {x: [grasp.x=1parsec]}\n",
             "task 'peg-in-hole', setting 'x'",
         ),
+        (  # a part held too short for its hole (tests/test_gripper.py)
+            f"name: a\ntasks: [{Path('tests/data/chamfer-tip.yaml').resolve()}]\n",
+            "the gripper meets the environment before the part reaches",
+        ),
     ],
 )
 def test_a_bad_jobs_file_is_one_line_and_exit_2_before_ray_starts(text, message, tmp_path):
