@@ -75,6 +75,10 @@ class ParticleState:
     #: Why the real arm would have stopped here (a joint at its limit: a reflex); None while
     #: it runs. A stopped particle stays where it is and in no contact for every later motion.
     stopped: str | None = None
+    #: The environment's pieces that the arm or hand (not the part) touches here, by name
+    #: (Panda model): the fingers on a rim, a link against a wall. A real gripper is not
+    #: meant to press there; `bilba execute` and the log say so.
+    arm_touches: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "q", _frozen(self.q, (7,)))

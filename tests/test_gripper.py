@@ -5,6 +5,7 @@ import re
 import time
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -16,7 +17,9 @@ from bilba_dist.belief.start import check_gripper_reaches_goal, check_gripper_st
 from bilba_dist.errors import TaskError
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.planning.stiffness import VERY_STIFF
-from bilba_dist.plans.replay import replay
+from bilba_dist.plans.execute import steps_of
+from bilba_dist.record.schemas import PARTICLE
+from bilba_dist.record.writer import particles
 from bilba_dist.task.loader import builtin_tasks
 from tests.test_hostile_input import assert_one_line_exit_2
 from tests.test_task_files import run_cli
@@ -60,12 +63,21 @@ def test_the_simulated_arm_stops_the_part_where_the_check_says():
                                               - [0, 0, drop]), np.zeros(7), 5.0, task.goal, 0.0)
             for drop in (0.045, 0.135)
         ]  # fmt: skip
-        end = replay(task, motions, [nominal], RolloutWorker(task))
+        steps = list(steps_of(task, motions, [nominal], RolloutWorker(task)))
+        (last, end) = steps[-1]
         floor_top = task.X_WO.translation[2] + 0.02
         above_mm = (end.states[0].X_WM.translation[2] - floor_top) * 1000
         assert (task.goal in end.contacts[0]) is reaches, (above_mm, end.contacts[0])
         if not reaches:
             assert above_mm >= _shortfall_mm(task) - 0.5, above_mm
+        # the fingers on the rim are reported: by the rollout, `bilba execute`, the log
+        touching = set(end.states[0].arm_touches)
+        assert bool(touching) is not reaches and touching <= {"wall_px", "wall_mx", "wall_py",
+                                                              "wall_my"}, touching  # fmt: skip
+        assert last.arm_touches == {piece: [0] for piece in touching}
+        logged = particles(end)[0]
+        jsonschema.validate(logged, PARTICLE)
+        assert set(logged.get("arm_touches", [])) == touching
 
 
 def test_the_built_in_tasks_and_examples_fit_their_gripper():

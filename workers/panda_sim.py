@@ -272,5 +272,6 @@ class PandaSim(OwnsClient):
             self.part_link,
             self.settings.contact_distance_m,
         )
-        state = ParticleState(X_WM=X_WM, q=q, dq=dq, V_WM=V_WM)
+        touches = self.env.touching(self.robot, self.part_link, self.settings.contact_distance_m)
+        state = ParticleState(X_WM=X_WM, q=q, dq=dq, V_WM=V_WM, arm_touches=touches)
         return RolloutResult(state, contacts, np.asarray(q_d), sim_time, settled, reachable)

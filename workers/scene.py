@@ -148,3 +148,15 @@ class EnvironmentBodies:
                 # c[5]: on A (env), c[6]: on B, c[7]: normal from B to A
                 found.append((i, np.array(c[5]), np.array(c[6]), -np.array(c[7])))
         return found
+
+    def touching(self, robot: int, part_link: int, distance: float) -> tuple[str, ...]:
+        """The names of the pieces that a link of ``robot`` other than ``part_link`` (the arm,
+        the hand, the fingers) comes within ``distance`` [m] of."""
+        return tuple(
+            piece.name
+            for piece, env_body in zip(self.part.pieces, self.bodies, strict=True)
+            if any(
+                c[4] != part_link
+                for c in p.getClosestPoints(env_body, robot, distance, physicsClientId=self.client)
+            )
+        )

@@ -148,6 +148,11 @@ def execute(
                 f"peak load {max(step.load.wrench[:3]):.1f} N, {max(step.load.wrench[3:]):.1f} "
                 f"N·m, joints {max(step.load.joint_torque):.1f} N·m"
             )
+            for piece, touching in sorted(step.arm_touches.items()):
+                click.echo(
+                    f"           the arm or hand touches {piece} (particles "
+                    f"{', '.join(map(str, touching))}): a real gripper is not meant to press there"
+                )
             for i, ok in enumerate(step.reached):
                 if not ok:
                     click.echo(

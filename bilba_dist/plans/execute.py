@@ -45,6 +45,7 @@ class Step:
     reached: list[bool]
     contacts: list[str]  # "is in CONTACTS" (or "stopped: WHY") per particle
     load: Load  # the spring's peaks over the particles (plans/loads.py)
+    arm_touches: dict[str, list[int]]  # environment piece -> particles whose arm touches it
 
 
 def describe(particle: Particle) -> str:
@@ -68,7 +69,11 @@ def steps_of(
             else "is in " + (", ".join(sorted(map(str, c))) or "free")
             for s, c in zip(belief.states, belief.contacts, strict=True)
         ]
-        yield Step(planned.contact, reached, shown, load_of(results)), belief
+        touches: dict[str, list[int]] = {}
+        for i, state in enumerate(belief.states):
+            for piece in state.arm_touches:
+                touches.setdefault(piece, []).append(i)
+        yield Step(planned.contact, reached, shown, load_of(results), touches), belief
 
 
 def final_misses(task: Task, belief: Belief) -> list[int]:

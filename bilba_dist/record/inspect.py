@@ -66,6 +66,8 @@ def show(log: Log, step: int) -> str:
         before = " ".join(f"{1e3 * v:+7.1f}" for v in b["X_WM"]["xyz"])
         after = " ".join(f"{1e3 * v:+7.1f}" for v in a["X_WM"]["xyz"])
         shown = f"stopped: {a['stopped']}" if a.get("stopped") else _contacts(a["contacts"])
+        if a.get("arm_touches"):
+            shown += f"; the arm touches {', '.join(a['arm_touches'])}"
         lines.append(f"{i:<9}{before:<27}{after:<27}{shown}")
     return "\n".join(lines)
 

@@ -27,6 +27,8 @@ PARTICLE = {
         "contacts": {"type": "array", "items": CONTACT},
         "q": {**VEC, "minItems": 7, "maxItems": 7},  # arm joints [rad]; absent in older logs
         "stopped": {"type": "string"},  # why its arm stopped (a joint at its limit)
+        # environment pieces the arm or hand (not the part) touches; absent when none
+        "arm_touches": {"type": "array", "items": {"type": "string"}},
     },
     "required": ["X_WM", "contacts"],
 }

@@ -40,6 +40,7 @@ def particles(belief: Belief) -> list[dict[str, Any]]:
             "contacts": sorted([list(c) for c in contacts]),
             "q": [float(v) for v in s.q],
             **({"stopped": s.stopped} if s.stopped else {}),
+            **({"arm_touches": list(s.arm_touches)} if s.arm_touches else {}),
         }
         for s, contacts in zip(belief.states, belief.contacts, strict=True)
     ]
