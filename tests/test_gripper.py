@@ -155,3 +155,14 @@ def test_the_fingers_close_on_the_part_where_it_is_between_them(tmp_path):
     }
     apart = np.linalg.norm(frames["panda_0/leftfinger"] - frames["panda_0/rightfinger"])
     assert apart == pytest.approx(0.040, abs=1e-9)
+
+
+def test_a_search_the_gripper_blocks_says_so():
+    """plan() does not run check_task: on the too-short task it searches, and its reason
+    names the arm touching the environment in the blocked contact's rollouts."""
+    task = load_task(SHORT)
+    result = plan(task, RolloutWorker(task), "bilba-variable", seed=0, timeout_s=20)
+    assert not result.success
+    assert "ended with the arm or hand touching the environment (wall_" in result.reason, (
+        result.reason
+    )

@@ -258,11 +258,19 @@ def _attempts(
         reached = [Reached(belief, mode, 0)]  # the contacts made so far in this attempt
         added: list[Particle] = []  # check particles added in this attempt (verification)
         while True:
+            evaluator = search.evaluator
+            before = evaluator.rollouts, evaluator.arm_touching, evaluator.arm_touches.copy()
             schedule, outcome = _next_contact(graph, belief, mode, search, rng, attempt, result)
             target = schedule[1]
             if not outcome.success:
+                touched = evaluator.arm_touches - before[2]
+                arm = (
+                    evaluator.rollouts - before[0],
+                    evaluator.arm_touching - before[1],
+                    touched.most_common(1)[0][0] if touched else "",
+                )
                 result.blocked.append(
-                    blocked(search.cache, belief, target, outcome.reached, outcome.checked)
+                    blocked(search.cache, belief, target, outcome.reached, outcome.checked, arm)
                 )
                 graph.prune(mode, target)
                 result.pruned.append((mode, target))

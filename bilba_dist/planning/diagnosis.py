@@ -14,6 +14,10 @@ from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.setpoints import start_rotation
 
+#: The share of a blocked contact's rollouts that must end with the arm or hand touching the
+#: environment for the diagnosis to name it.
+ARM_SHARE = 0.25
+
 
 @dataclass(frozen=True)
 class Blocked:
@@ -27,6 +31,9 @@ class Blocked:
     region_m: float  # the contact region's largest extent (first particle that has one)
     checked: int = 0  # check particles (robust acceptance) in the contact
     n_check: int = 0  # check particles in all (0: robust acceptance off)
+    rollouts: int = 0  # rollouts the attempt took
+    arm_touching: int = 0  # ... of which ended with the arm or hand touching the environment
+    arm_piece: str = ""  # the piece it touched most
 
 
 def _diameter(points: np.ndarray) -> float:
@@ -34,10 +41,16 @@ def _diameter(points: np.ndarray) -> float:
 
 
 def blocked(
-    cache: SliceCache, belief: Belief, contact: ContactPair, reached: int, checked: int = 0
+    cache: SliceCache,
+    belief: Belief,
+    contact: ContactPair,
+    reached: int,
+    checked: int = 0,
+    arm: tuple[int, int, str] = (0, 0, ""),
 ) -> Blocked:
     """What stood in the way of ``contact`` from ``belief`` (no random draws: the planner's
-    generator is untouched)."""
+    generator is untouched); ``arm``: the attempt's rollouts, how many ended with the arm or
+    hand touching the environment, and the piece it touched most."""
     positions, no_region = [], 0
     region_m = 0.0
     for i, particle in enumerate(belief.particles):
@@ -54,7 +67,9 @@ def blocked(
             region_m = _diameter(np.unique(triangles.reshape(-1, 3), axis=0))
     n_check = len(belief.check) if belief.check is not None else 0
     spread_m = _diameter(np.array(positions))
-    return Blocked(contact, reached, len(belief), no_region, spread_m, region_m, checked, n_check)
+    return Blocked(
+        contact, reached, len(belief), no_region, spread_m, region_m, checked, n_check, *arm
+    )
 
 
 def explain(failures: list[Blocked]) -> str:
@@ -83,7 +98,15 @@ def explain(failures: list[Blocked]) -> str:
         text += f"no motion brought more than {best} of {last.n} particles into it"
     if last.no_region:
         text += f"; it has no region at the rotations of {last.no_region} of {last.n} particles"
-    if last.spread_m > last.region_m > 0:
+    rollouts, touching = sum(f.rollouts for f in same), sum(f.arm_touching for f in same)
+    if touching and touching >= ARM_SHARE * rollouts:
+        piece = Counter(f.arm_piece for f in same if f.arm_piece).most_common(1)[0][0]
+        text += (
+            f"; {touching} of its {rollouts} rollouts ended with the arm or hand touching the "
+            f"environment ({piece} most): the gripper in the way (docs/task-files.md, The "
+            "gripper must fit too)"
+        )
+    elif last.spread_m > last.region_m > 0:  # (the spread is beside the point then)
         text += (
             f"; the particles spread {last.spread_m * 1000:.1f} mm across, wider than its "
             f"region ({last.region_m * 1000:.1f} mm): less uncertainty, or a contact before "

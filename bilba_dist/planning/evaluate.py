@@ -18,6 +18,7 @@ check particle instead (MakeContact samples setpoints on those particles too, ta
 with the planning particles'), and only one that brings it in is run on the rest.
 """
 
+from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -62,6 +63,10 @@ class Evaluator:
     chunk: int = 8  # candidates per batch
     rollouts: int = 0
     on_batch: Callable[[int], None] = field(default=lambda n: None)
+    #: Rollouts that ended with the arm or hand touching the environment, per piece touched
+    #: (the planner's diagnosis: fingers on a rim block a contact).
+    arm_touches: Counter[str] = field(default_factory=Counter)
+    arm_touching: int = 0
     # Screening requests of the current belief by candidate: one object per candidate, so a
     # request prefetched from one call is the one a later call asks for.
     _screens: dict[int, tuple[Candidate, RolloutRequest]] = field(default_factory=dict)
@@ -73,6 +78,10 @@ class Evaluator:
         """Run ``requests`` (counted); ``prefetch`` is what will probably come next."""
         results = self.backend.simulate(requests, prefetch) if requests else []
         self.rollouts += len(results)
+        for result in results:
+            if result.state.arm_touches:
+                self.arm_touching += 1
+                self.arm_touches.update(result.state.arm_touches)
         self.on_batch(len(results))
         return results
 
