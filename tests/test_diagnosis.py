@@ -72,3 +72,40 @@ def test_a_goal_met_at_its_edge_is_warned_of(peg):
     other = ContactPair("wall_px/inner", peg.goal.manip)  # another piece: not the goal's edge
     contacts = tuple(c | {other} for c in final.contacts)
     assert goal_edge_warning(peg.goal, dataclasses.replace(final, contacts=contacts)) is None
+
+
+def test_a_part_that_ends_on_the_edge_of_its_goal_face_is_a_warning():
+    """Our open-ended card slot let a plan slide the card out until its fingers cleared the
+    walls, 7 % of its bottom on the floor. Here the chamfered-tip peg (32 mm square bottom on
+    a 41 mm floor): home, all of it; moved 30 mm aside (kept level), 9/32 of it."""
+    import dataclasses
+
+    import numpy as np
+    import pinocchio as pin
+    import pytest
+
+    from bilba_dist.belief.particles import make_particle
+    from bilba_dist.belief.start import start_belief
+    from bilba_dist.planning.diagnosis import goal_overlap, goal_overlap_warning
+    from bilba_dist.task.loader import load_task
+
+    task = load_task("tests/data/chamfer-tip.yaml", [])
+    home = task.X_WO * pin.SE3(np.eye(3), np.array([0, 0, 0.02]))  # tip on the floor's top
+    belief = start_belief(task, [make_particle(task, {})] * 2)
+    aside = pin.SE3(home.rotation, home.translation + np.array([0.03, 0, 0]))
+    final = dataclasses.replace(
+        belief,
+        states=(dataclasses.replace(belief.states[0], X_WM=home),
+                dataclasses.replace(belief.states[1], X_WM=aside)),
+        contacts=(frozenset({task.goal}),) * 2,
+    )  # fmt: skip
+    assert goal_overlap(task, final, 0) == pytest.approx(1.0)
+    assert goal_overlap(task, final, 1) == pytest.approx((16 + 20.5 - 30) / 32, abs=1e-6)
+    warning = goal_overlap_warning(task, final)
+    assert warning is not None and warning.startswith("particles 1 end with only 20%–20%")
+    assert (
+        goal_overlap_warning(
+            task, dataclasses.replace(final, contacts=(frozenset({task.goal}), frozenset()))
+        )
+        is None
+    )

@@ -22,7 +22,7 @@ from bilba_dist.cli.options import (
 from bilba_dist.cli.outputs import refuse_overwriting, task_file
 from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
-from bilba_dist.planning.diagnosis import goal_edge_warning
+from bilba_dist.planning.diagnosis import goal_edge_warning, goal_overlap_warning
 from bilba_dist.planning.result import PlanResult
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
@@ -294,4 +294,6 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
             click.echo(f"particle {i}: {', '.join(sorted(map(str, contacts))) or 'free'}")
         if result.success and (edge := goal_edge_warning(task.goal, result.final_belief)):
             click.echo(f"warning: {edge}", err=True)
+        if result.success and (sliver := goal_overlap_warning(task, result.final_belief)):
+            click.echo(f"warning: {sliver}", err=True)
     click.echo(f"plan file  {out}")
