@@ -10,6 +10,7 @@ from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.errors import TaskError, UnreachableError
 from bilba_dist.geometry.pose import rotation_key
 from bilba_dist.robot.drivers import planning_arms
+from bilba_dist.robot.gripper import finger_opening, gripper_part
 from bilba_dist.robot.panda import Q_CENTRE, PandaModel
 from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import Task
@@ -125,16 +126,17 @@ def _gripper_slice(task: Task, R_OH: np.ndarray) -> CObsSlice:
     position there (the gripper: the hand, fingers and flange, as the simulated arm collides
     with them; each particle's fingers differ from the nominal's by its offsets' share of the
     part's width, a millimetre or two)."""
-    from bilba_dist.robot.gripper import finger_opening, gripper_part
-
     key = (task.hash, rotation_key(R_OH))
     if key not in _GRIPPER_SLICES:
+        if len(_GRIPPER_SLICES) >= GRIPPER_SLICES_KEPT:  # a batch loads task after task
+            _GRIPPER_SLICES.clear()
         opening = finger_opening(task.manipuland, make_particle(task, {}).X_GM)
         _GRIPPER_SLICES[key] = CObsSlice.build(task.environment, gripper_part(opening), R_OH)
     return _GRIPPER_SLICES[key]
 
 
 _GRIPPER_SLICES: dict[tuple[str, bytes], CObsSlice] = {}
+GRIPPER_SLICES_KEPT = 16
 
 
 def check_gripper_start(task: Task, particles: Sequence[Particle]) -> None:

@@ -3,10 +3,10 @@
 
 They are the shapes the simulated arm collides with (PyBullet takes the convex hull of each
 collision mesh and grows it by its 1 mm margin; the fingers locked where they close on the
-part, ``finger_opening``), so the C-obs
-of the environment against this part says where the gripper itself would be inside the
-environment: a part held too short for the depth of its hole can never reach the goal,
-because the fingers meet the rim first (docs/task-files.md, The gripper must fit too).
+part, ``finger_opening``), so the C-obs of the environment against this part says where the
+gripper itself would be inside the environment: a part held too short for the depth of its
+hole can never reach the goal, because the fingers meet the rim first (docs/task-files.md,
+The gripper must fit too).
 """
 
 import os
