@@ -110,7 +110,8 @@ def test_bilba_plan_refuses_a_part_held_too_short_in_one_line(tmp_path):
     out, log = tmp_path / "p.json", tmp_path / "l.mcap"
     start = time.perf_counter()
     result = run_cli("plan", SHORT, "--workers", "0", "--out", str(out), "--log", str(log))
-    assert_one_line_exit_2(result, "the gripper meets the environment", time.perf_counter() - start)
+    elapsed = time.perf_counter() - start  # reading the hand's meshes cold: ~2.4 s here
+    assert_one_line_exit_2(result, "the gripper meets the environment", elapsed, limit=20.0)
     assert not out.exists() and not log.exists()
     graph = run_cli("graph", SHORT)  # graph shows the modes and warns
     assert graph.exit_code == 0 and "warning:" in graph.stderr and "short of it" in graph.stderr
