@@ -128,8 +128,9 @@ def load_jobs(path: Path) -> Batch:
                 if spec.preset is not None:
                     loaded = with_preset(loaded, spec.preset)
                 tasks[(task, setting)] = loaded
-                check_start_free(loaded, initial_belief(loaded))
-                check_gripper_start(loaded, initial_belief(loaded))
+                particles = initial_belief(loaded)
+                check_start_free(loaded, particles)
+                check_gripper_start(loaded, particles)
                 if n == 0:  # the goal is the same in every setting
                     check_gripper_reaches_goal(loaded)
             except BilbaError as exc:
