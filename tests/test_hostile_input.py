@@ -89,6 +89,14 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
         edited("friction: 0.45", "friction: " + "9" * 5000),
         "not valid YAML: Exceeds the limit (4300 digits)",
     ),
+    "a tag its value does not fit": (
+        edited("friction: 0.45", "friction: !!timestamp 0.45"),
+        "not valid YAML: '0.45' is not a timestamp",
+    ),
+    "a list as a key": (
+        edited("friction: 0.45", "friction: 0.45\n[1, 2]: 3"),
+        "a key must be a name, not a list",
+    ),
     "preset a list": (
         edited("# No planner section", "planner: {preset: [paper]}\n# No planner section"),
         "planner.preset",

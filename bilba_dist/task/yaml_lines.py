@@ -36,8 +36,10 @@ def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, in
                 _index(node, (), lines, source)
             try:
                 data = loader.construct_document(node) if node is not None else None
-            except ValueError as exc:  # e.g. an integer of over 4300 digits
-                raise TaskError(f"{source}: not valid YAML: {str(exc).splitlines()[0]}") from None
+            except yaml.YAMLError:
+                raise
+            except Exception as exc:  # PyYAML's constructors raise what they meet
+                raise TaskError(_unreadable_value(node, source, exc)) from None
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
@@ -85,6 +87,12 @@ def _index(node: yaml.Node, path: Location, lines: dict[Location, int], source: 
         seen: dict[Any, int] = {}
         for key, value in node.value:
             line = key.start_mark.line + 1
+            if not isinstance(key, yaml.ScalarNode):  # `- [1, 2]: ` or `? {a: 1}`
+                kind = "list" if isinstance(key, yaml.SequenceNode) else "mapping"
+                raise TaskError(
+                    f"{source}:{line}: a key must be a name, not a {kind} (a stray ':' after "
+                    "a value?)"
+                )
             if key.value in seen and key.tag != "tag:yaml.org,2002:merge":
                 dotted = ".".join(str(p) for p in (*path, key.value))
                 raise TaskError(
@@ -97,6 +105,33 @@ def _index(node: yaml.Node, path: Location, lines: dict[Location, int], source: 
     elif isinstance(node, yaml.SequenceNode):
         for i, value in enumerate(node.value):
             _index(value, (*path, i), lines, source)
+
+
+def _unreadable_value(root: yaml.Node, source: str, exc: Exception) -> str:
+    """The message for a document PyYAML composed but could not construct: a value its tag
+    does not fit (``!!timestamp 5``, ``!!bool maybe``, an integer of over 4300 digits).
+    Each scalar is constructed alone, in document order, to find the line."""
+    stack, seen = [root], set()
+    while stack:
+        node = stack.pop()
+        if id(node) in seen:  # an alias: the same node again
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.ScalarNode) and node.tag != "tag:yaml.org,2002:merge":
+            try:
+                yaml.SafeLoader("").construct_object(node)
+            except Exception as scalar_exc:
+                reason = (
+                    str(scalar_exc).splitlines()[0] if isinstance(scalar_exc, ValueError) else ""
+                )
+                tag = node.tag.rsplit(":", 1)[-1]
+                detail = reason or f"{node.value[:40]!r} is not a {tag}"
+                return f"{source}:{node.start_mark.line + 1}: not valid YAML: {detail}"
+        elif isinstance(node, yaml.MappingNode):
+            stack.extend(n for pair in reversed(node.value) for n in reversed(pair))
+        elif isinstance(node, yaml.SequenceNode):
+            stack.extend(reversed(node.value))
+    return f"{source}: not valid YAML: {str(exc).splitlines()[0] or type(exc).__name__}"
 
 
 def line_of(location: Location, lines: dict[Location, int]) -> int | None:
