@@ -32,14 +32,15 @@ def load_yaml_with_lines(text: str, source: str) -> tuple[Any, dict[Location, in
         loader = yaml.SafeLoader(text)
         try:  # one composition serves the line index and the data
             node = loader.get_single_node()
+            data = None
             if node is not None:  # indexed first: constructing flattens merge keys in place
                 _index(node, (), lines, source)
-            try:
-                data = loader.construct_document(node) if node is not None else None
-            except yaml.YAMLError:
-                raise
-            except Exception as exc:  # PyYAML's constructors raise what they meet
-                raise TaskError(_unreadable_value(node, source, exc)) from None
+                try:
+                    data = loader.construct_document(node)
+                except yaml.YAMLError:
+                    raise
+                except Exception as exc:  # PyYAML's constructors raise what they meet
+                    raise TaskError(_unreadable_value(node, source, exc)) from None
         finally:
             loader.dispose()
     except yaml.YAMLError as exc:
