@@ -31,3 +31,25 @@ def test_angles_convert_to_radians(text, rad):
 def test_bad_quantities_name_the_problem(parse, text, complaint):
     with pytest.raises(ValueError, match=complaint):
         parse(text)
+
+
+@pytest.mark.parametrize(
+    ("rpy", "error"),
+    [
+        ([3.1416, 0, 0], None),  # π rounded up, as a printed pose often is
+        (["270deg", 0, "-200deg"], None),  # the same turns written the other way round
+        ([180, 0, 0], "outside ±360 deg"),  # 180 rad: the unit forgotten
+        (["361deg", 0, 0], "outside ±360 deg"),
+    ],
+)
+def test_a_pose_angle_may_be_any_turn_but_not_a_forgotten_unit(rpy, error):
+    from pydantic import ValidationError
+
+    from bilba_dist.task.schema import PoseSpec
+
+    if error is None:
+        pose = PoseSpec.model_validate({"xyz": [0, 0, 0], "rpy": rpy})
+        assert pose.rpy[0] == pytest.approx(parse_angle(rpy[0]))
+    else:
+        with pytest.raises(ValidationError, match=error):
+            PoseSpec.model_validate({"xyz": [0, 0, 0], "rpy": rpy})

@@ -3,7 +3,9 @@
 A bare number is taken in SI units (metres, radians). A string is a number followed by a unit,
 e.g. ``"2deg"``, ``"1.5 cm"``. The wrong kind of unit (``"2cm"`` for an angle) is an error,
 and so is a number that is not finite, a length outside the workspace (±2 m: the Panda
-reaches 0.855 m from its base, and parts' frames sit near it) or an angle beyond ±180°.
+reaches 0.855 m from its base, and parts' frames sit near it) or an angle beyond a
+turn either way (±360°: a pose written with 270° or with π rounded up is a pose; a bare 180
+is 180 rad, a unit forgotten).
 """
 
 import math
@@ -62,7 +64,7 @@ def within(limit: float, unit: str, scale: float = 1.0, what: str = ""):
 
 #: Lengths anywhere in a task [m] and angles [rad].
 WORKSPACE_M = 2.0
-MAX_ANGLE = math.pi
+MAX_ANGLE = 2 * math.pi
 
 
 def parse_length(value: object) -> float:
