@@ -136,6 +136,53 @@ def test_a_search_whose_plans_keep_failing_stops_at_its_effort_limit(monkeypatch
     assert not result.verification.passed and result.verification.held == {"1": 0.0}
     assert "within 2x the time of the first" in result.reason
     assert result.first_plan_s > 0 and result.planning_time_s < 2 * result.first_plan_s + 30
+    assert result.verification.lost == [{"grasp.pitch": 0.0, "env.y": 0.5}]
+    assert "; it lost offsets it was not planned on ((grasp.pitch +0.00 deg, env.y +500.0 mm))" in (
+        result.reason
+    )
+
+
+@pytest.mark.parametrize(
+    ("uncertainty", "belief", "lost", "says"),
+    [
+        (  # one axis: its values, sorted, in the file's units; the axis generator's knob
+            {"grasp.pitch": "2deg"},
+            {"generator": "axis", "points": 5},
+            [{"grasp.pitch": 0.02}, {"grasp.pitch": -0.0105}],
+            "(grasp.pitch -0.60, +1.15 deg): try planning on more particles (belief: {points: 7} "
+            "puts particles between them); `bilba validate PLAN --map grasp.pitch=2.00deg` shows",
+        ),
+        (  # two axes: each offset whole; extremal+random's knob; both axes mapped
+            {"grasp.x": "1cm", "friction": "50%"},
+            {"generator": "extremal+random", "random": 2},
+            [{"grasp.x": 0.0031, "friction": -0.25}],
+            "((grasp.x +3.1 mm, friction -25 %)): try planning on more particles (belief: "
+            "{random: 6} draws more of them); `bilba validate PLAN --map grasp.x=10.0mm --map "
+            "friction=50%`",
+        ),
+        (
+            {"env.y": "1cm"},
+            {"generator": "explicit", "particles": [{}, {"env": {"y": "1cm"}}]},
+            [{"env.y": 0.004}],
+            "(env.y +4.0 mm): try planning on more particles (add offsets like these to "
+            "belief.particles)",
+        ),
+    ],
+)
+def test_a_plan_that_failed_verification_says_what_it_lost_and_how_to_plan_on_it(
+    uncertainty, belief, lost, says
+):
+    import yaml
+
+    from bilba_dist.planning.result import Verification
+    from bilba_dist.planning.verify import more_particles_hint
+    from bilba_dist.task.loader import builtin_tasks
+
+    data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+    task = load_task({**data, "uncertainty": uncertainty, "belief": belief})
+    failed = Verification(42, {"1": 0.9}, passed=False, lost=lost)
+    assert says in more_particles_hint(task, failed)
+    assert more_particles_hint(task, Verification(42, {"1": 1.0})) == ""
 
 
 def test_a_search_out_of_time_before_its_effort_limit_says_the_timeout_ended_it(monkeypatch):

@@ -24,6 +24,7 @@ from bilba_dist.errors import BilbaError
 from bilba_dist.planning.bilba import PLANNERS, Progress, plan
 from bilba_dist.planning.diagnosis import goal_edge_warning, goal_overlap_warning
 from bilba_dist.planning.result import PlanResult
+from bilba_dist.planning.verify import more_particles_hint
 from bilba_dist.plans.file import dumps, plan_document, write_plan, write_plan_text
 from bilba_dist.record.writer import LogWriter
 from bilba_dist.robot.drivers import DRIVER_NAMES
@@ -286,6 +287,8 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
     if check is not None and result.success:
         how = "passed" if check.passed else FAILED
         click.echo(f"verified   {how} on {check.text()} (plan {check.plans} of the search)")
+        if not check.passed and (hint := more_particles_hint(task, check)):
+            click.echo(f"warning: {hint.replace('PLAN', str(out))}", err=True)
     for k, m in enumerate(result.motions, 1):
         xyz = " ".join(f"{v:+.4f}" for v in m.G_d.translation)
         click.echo(f"motion {k:<3} to {m.contact}  G_d [{xyz}] m  score {m.score:.2f}")

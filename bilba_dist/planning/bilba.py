@@ -40,6 +40,7 @@ from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import driver_fit, fixed_stiffness, variable_stiffness
 from bilba_dist.planning.verify import (
     ADD_CHECKS,
+    more_particles_hint,
     verify,
     verify_particles,
     with_more_checks,
@@ -129,6 +130,8 @@ def plan(
         else:
             ended = f"({result.reason})"
         result.reason = f"no plan passed verification {ended}: the one that held best"
+        if hint := more_particles_hint(task, result.verification):
+            result.reason += f"; {hint}"
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
     if result.success and validate_on is not None:

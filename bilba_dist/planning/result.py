@@ -35,6 +35,8 @@ class Verification:
     held: dict[str, float] = field(default_factory=dict)
     passed: bool = True
     plans: int = 0  # plans verified in the search, this one included
+    #: The uncertain-axis offsets of the particles it lost, each once (friction twins merged)
+    lost: list[dict[str, float]] = field(default_factory=list)
 
     def text(self) -> str:
         held = ", ".join(

@@ -11,6 +11,7 @@ they made too (planning/bilba.py, ``resume_at``), or starts over. The replay may
 most ``verify_share`` of the rollouts the search has spent so far, so an easy plan gets
 fewer particles (at least one offset) and a hard one all of them."""
 
+import math
 from dataclasses import replace
 
 from bilba_dist.belief.particles import Particle, make_particle, random_offsets
@@ -19,6 +20,7 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion, Verification
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
+from bilba_dist.task.schema import AxisBelief, ExtremalRandomBelief, check_axis_key
 from bilba_dist.task.timestep import verify_timestep
 
 #: The verification draw: neither the check particles' (7) nor `bilba validate`'s usual
@@ -81,7 +83,65 @@ def verify(
     }
     passed = min(held.values()) >= task.spec.planner.verify_min
     failed = [p for p, good in zip(particles, ok, strict=True) if not good]
-    return Verification(len(particles), held, passed), failed
+    bounded = [k for k, v in task.spec.uncertainty.items() if v > 0]
+    lost: list[dict[str, float]] = []
+    for p in failed:  # the uncertain axes' offsets (not a robust-acceptance twin's friction)
+        offsets = {k: p.offsets.get(k, 0.0) for k in bounded}
+        offsets |= {k: v for k, v in p.offsets.items() if k not in bounded and k != "friction"}
+        if offsets not in lost:
+            lost.append(offsets)
+    return Verification(len(particles), held, passed, lost=lost), failed
+
+
+def more_particles_hint(task: Task, verification: Verification) -> str:
+    """For a plan that failed verification: the offsets it lost, which lie between (or
+    beyond the spread of) the particles it was planned on, and how to plan on more of them
+    (the task's belief generator's own knob) and see where it fails (``bilba validate
+    --map``). Empty when nothing was lost."""
+    if not verification.lost:
+        return ""
+    keys = list(dict.fromkeys(k for o in verification.lost for k in o))
+    if len(keys) == 1:  # grasp.pitch -0.94, -0.60, +1.10 deg
+        shown = [_number(keys[0], v) for v in sorted(o[keys[0]] for o in verification.lost)]
+        lost = f"{keys[0]} {', '.join(shown[:4])}{' …' if len(shown) > 4 else ''} {_unit(keys[0])}"
+    else:  # (grasp.x +3.1 mm, env.y -0.4 mm); …
+        shown = [
+            "(" + ", ".join(f"{k} {_number(k, v)} {_unit(k)}" for k, v in o.items()) + ")"
+            for o in verification.lost
+        ]
+        lost = "; ".join(shown[:3]) + (" …" if len(shown) > 3 else "")
+    belief = task.spec.belief
+    if isinstance(belief, AxisBelief):
+        knob = f"belief: {{points: {min(belief.points + 2, 51)}}} puts particles between them"
+    elif isinstance(belief, ExtremalRandomBelief):
+        knob = f"belief: {{random: {belief.random + 4}}} draws more of them"
+    else:
+        knob = "add offsets like these to belief.particles"
+    axes = [k for k, v in task.spec.uncertainty.items() if v > 0]
+    mapped = " ".join(
+        f"--map {k}={_number(k, task.spec.uncertainty[k], sign='')}{_unit(k)}" for k in axes[:2]
+    )
+    where = f"; `bilba validate PLAN {mapped}` shows where it fails" if mapped else ""
+    return (
+        f"it lost offsets it was not planned on ({lost}): try planning on more particles "
+        f"({knob}){where}"
+    )
+
+
+def _unit(axis: str) -> str:
+    """The unit a task file would write an offset on ``axis`` in."""
+    frame, name = check_axis_key(axis)
+    return "%" if frame == "physical" else "mm" if name in ("x", "y", "z") else "deg"
+
+
+def _number(axis: str, value: float, sign: str = "+") -> str:
+    """An offset on ``axis`` in ``_unit(axis)``, to 0.1 mm, 0.01° or 1 %."""
+    unit = _unit(axis)
+    if unit == "%":
+        return f"{value * 100:{sign}.0f}"
+    if unit == "mm":
+        return f"{value * 1e3:{sign}.1f}"
+    return f"{math.degrees(value):{sign}.2f}"
 
 
 def with_more_checks(task: Task, b0: Belief, extra: list[Particle]) -> Belief:
