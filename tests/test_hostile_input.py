@@ -272,7 +272,17 @@ def plan_cases(text: str) -> dict[str, tuple[str | bytes, str]]:
             rehashed(doc, twice_named(spec)),
             "part 'hole': piece names must be unique: floor",
         ),
+        "300 pieces, hash recomputed": (  # the loader's cap, held by a plan file's task too
+            rehashed(doc, many_pieces(spec, 300)),
+            "task.spec: 300 environment pieces × 1 manipuland pieces = 300 C-obstacles, over 256",
+        ),
     }
+
+
+def many_pieces(spec: dict, n: int) -> dict:
+    first = spec["environment"]["pieces"][0]
+    pieces = [{**first, "name": f"piece{i}"} for i in range(n)]
+    return {**spec, "environment": {**spec["environment"], "pieces": pieces}}
 
 
 def twice_named(spec: dict) -> dict:

@@ -293,8 +293,8 @@ def _checked_task(document: dict[str, Any], path: Path) -> TaskSpec:
         spec = TaskSpec.model_validate(task["spec"])
     except ValidationError as exc:
         first = exc.errors()[0]
-        where = ".".join(str(p) for p in first["loc"])
-        message = f"task.spec.{where}: {first['msg']}"
+        where = "".join(f".{p}" for p in first["loc"])
+        message = f"task.spec{where}: {first['msg'].removeprefix('Value error, ')}"
         raise BilbaError(f"{path}: malformed plan file: {message}") from None
     canonical = json.dumps(task["spec"], sort_keys=True)
     if hashlib.sha256(canonical.encode()).hexdigest() != task["hash"]:

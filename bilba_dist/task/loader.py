@@ -19,7 +19,6 @@ from bilba_dist.geometry.mesh import mesh_bodies
 from bilba_dist.geometry.piece import Part, box_piece, convex_piece
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
-    MAX_PIECE_PAIRS,
     MAX_PIECES,
     PAPER_PLANNER,
     PRESETS,
@@ -29,6 +28,7 @@ from bilba_dist.task.schema import (
     PoseSpec,
     TaskSpec,
     parse_axis_values,
+    piece_pairs_problem,
 )
 from bilba_dist.task.timestep import auto_timestep
 from bilba_dist.task.yaml_lines import Location, line_of, load_yaml_with_lines, read_text
@@ -270,13 +270,8 @@ def with_meshes_loaded(
             )
         parts[key] = part.model_copy(update={"pieces": pieces})
     env, manip = (len(parts[key].pieces) for key in ("environment", "manipuland"))
-    if env * manip > MAX_PIECE_PAIRS:
-        raise TaskError(
-            f"{source}: {env} environment pieces × {manip} manipuland pieces = {env * manip} "
-            f"C-obstacles, over {MAX_PIECE_PAIRS}: a C-obs slice takes minutes at ~100 and "
-            "grows faster than their number; merge pieces (a coarser CoACD threshold, fewer "
-            "objects)"
-        )
+    if problem := piece_pairs_problem(env, manip):
+        raise TaskError(f"{source}: {problem}")
     return spec.model_copy(update=parts)
 
 

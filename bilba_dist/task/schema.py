@@ -83,6 +83,18 @@ MAX_PIECES = 500
 MAX_PIECE_PAIRS = 256
 
 
+def piece_pairs_problem(env: int, manip: int) -> str:
+    """Why ``env`` environment pieces against ``manip`` manipuland pieces are too many
+    (the C-obstacles of a slice); empty when they are not."""
+    if env * manip <= MAX_PIECE_PAIRS:
+        return ""
+    return (
+        f"{env} environment pieces × {manip} manipuland pieces = {env * manip} C-obstacles, "
+        f"over {MAX_PIECE_PAIRS}: a C-obs slice takes minutes at ~100 and grows faster than "
+        "their number; merge pieces (a coarser CoACD threshold, fewer objects)"
+    )
+
+
 class PieceSpec(Strict):
     name: str = Field(pattern=r"^[A-Za-z0-9_\-]+$")
     box: BoxSpec | None = None
@@ -346,6 +358,14 @@ class TaskSpec(Strict):
         if negative:
             raise ValueError(f"uncertainty bounds must be >= 0: {', '.join(negative)}")
         return values
+
+    @model_validator(mode="after")
+    def _piece_pairs(self) -> "TaskSpec":
+        # as listed: a mesh piece may hold several objects, counted again once loaded
+        problem = piece_pairs_problem(len(self.environment.pieces), len(self.manipuland.pieces))
+        if problem:
+            raise ValueError(problem)
+        return self
 
     @model_validator(mode="after")
     def _particle_count(self) -> "TaskSpec":
