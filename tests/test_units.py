@@ -53,3 +53,16 @@ def test_a_pose_angle_may_be_any_turn_but_not_a_forgotten_unit(rpy, error):
     else:
         with pytest.raises(ValidationError, match=error):
             PoseSpec.model_validate({"xyz": [0, 0, 0], "rpy": rpy})
+
+
+def test_a_start_joint_past_a_half_turn_is_a_unit_forgotten():
+    """Pose angles take a whole turn; a Panda joint angle stays within ±180° (no joint of
+    the arm turns past ±166°)."""
+    from pydantic import ValidationError
+
+    from bilba_dist.task.schema import RobotStartSpec
+
+    posture = [0.0, 0.0, 0.0, -1.5, 0.0, 1.5, 0.8]
+    assert RobotStartSpec.model_validate({"joints": posture}).joints == tuple(posture)
+    with pytest.raises(ValidationError, match=r"229\.183 deg is outside ±180 deg"):
+        RobotStartSpec.model_validate({"joints": [4.0, *posture[1:]]})

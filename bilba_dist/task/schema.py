@@ -17,7 +17,15 @@ from pydantic import (
     model_validator,
 )
 
-from bilba_dist.task.units import Angle, Length, parse_angle, parse_fraction, parse_length, within
+from bilba_dist.task.units import (
+    Angle,
+    JointAngle,
+    Length,
+    parse_angle,
+    parse_fraction,
+    parse_length,
+    within,
+)
 
 AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 ANGULAR_AXES = ("roll", "pitch", "yaw")
@@ -122,7 +130,10 @@ class RobotStartSpec(Strict):
     the gripper pose is their forward kinematics). Given both, the joints seed the IK."""
 
     gripper: PoseSpec | None = None
-    joints: tuple[Angle, Angle, Angle, Angle, Angle, Angle, Angle] | None = None
+    joints: (
+        tuple[JointAngle, JointAngle, JointAngle, JointAngle, JointAngle, JointAngle, JointAngle]
+        | None
+    ) = None
 
     @model_validator(mode="after")
     def _one_given(self) -> "RobotStartSpec":

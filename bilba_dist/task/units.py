@@ -87,3 +87,8 @@ Length = Annotated[
 Angle = Annotated[
     float, BeforeValidator(parse_angle), AfterValidator(within(MAX_ANGLE, "deg", math.pi / 180))
 ]
+#: A Panda joint angle: none of its joints turns past ±166°, so ±180° catches a unit forgotten
+#: without a model of the arm (its limits are checked where the start is solved).
+JointAngle = Annotated[
+    float, BeforeValidator(parse_angle), AfterValidator(within(math.pi, "deg", math.pi / 180))
+]
