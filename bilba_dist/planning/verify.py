@@ -11,7 +11,6 @@ they made too (planning/bilba.py, ``resume_at``), or starts over. The replay may
 most ``verify_share`` of the rollouts the search has spent so far, so an easy plan gets
 fewer particles (at least one offset) and a hard one all of them."""
 
-import math
 from dataclasses import replace
 
 from bilba_dist.belief.particles import Particle, make_particle, random_offsets
@@ -20,7 +19,7 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion, Verification
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
-from bilba_dist.task.schema import AxisBelief, ExtremalRandomBelief, check_axis_key
+from bilba_dist.task.schema import AxisBelief, ExtremalRandomBelief, axis_unit
 from bilba_dist.task.timestep import verify_timestep
 
 #: The verification draw: neither the check particles' (7) nor `bilba validate`'s usual
@@ -129,19 +128,14 @@ def more_particles_hint(task: Task, verification: Verification) -> str:
 
 
 def _unit(axis: str) -> str:
-    """The unit a task file would write an offset on ``axis`` in."""
-    frame, name = check_axis_key(axis)
-    return "%" if frame == "physical" else "mm" if name in ("x", "y", "z") else "deg"
+    return axis_unit(axis)[0]
 
 
 def _number(axis: str, value: float, sign: str = "+") -> str:
-    """An offset on ``axis`` in ``_unit(axis)``, to 0.1 mm, 0.01° or 1 %."""
-    unit = _unit(axis)
-    if unit == "%":
-        return f"{value * 100:{sign}.0f}"
-    if unit == "mm":
-        return f"{value * 1e3:{sign}.1f}"
-    return f"{math.degrees(value):{sign}.2f}"
+    """An offset on ``axis`` in its unit (`axis_unit`), to 0.1 mm, 0.01° or 1 %."""
+    unit, scale = axis_unit(axis)
+    digits = {"%": 0, "mm": 1, "deg": 2}[unit]
+    return f"{value * scale:{sign}.{digits}f}"
 
 
 def with_more_checks(task: Task, b0: Belief, extra: list[Particle]) -> Belief:

@@ -13,7 +13,7 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.rollout import Motion, RolloutBackend, RolloutResult, require_world
 from bilba_dist.task.loader import Task
-from bilba_dist.task.schema import ANGULAR_AXES, PHYSICAL_AXES
+from bilba_dist.task.schema import axis_unit
 
 
 def transitions(
@@ -112,11 +112,9 @@ class SuccessMap:
         import matplotlib.pyplot as plt
 
         def shown(axis: str, v: list[float]) -> tuple[list[float], str]:
-            if axis in PHYSICAL_AXES:
-                return [100 * x for x in v], f"{axis} offset [%]"
-            if axis.split(".")[1] in ANGULAR_AXES:
-                return [float(np.degrees(x)) for x in v], f"{axis} [deg]"
-            return [1000 * x for x in v], f"{axis} [mm]"
+            unit, scale = axis_unit(axis)
+            label = f"{axis} offset [%]" if unit == "%" else f"{axis} [{unit}]"
+            return [scale * x for x in v], label
 
         fig, ax = plt.subplots(figsize=(5.5, 4.5), dpi=120)
         x, x_label = shown(self.axes[0], self.values[0])

@@ -398,6 +398,15 @@ def particle_count(belief: "AxisBelief | ExtremalRandomBelief | ExplicitBelief",
     return 1 + (belief.points - 1) * axes
 
 
+def axis_unit(axis: str) -> tuple[str, float]:
+    """The unit an offset on ``axis`` is shown in, and how many of it make one SI unit:
+    ("mm", 1000), ("deg", 180/π) or ("%", 100)."""
+    frame, name = check_axis_key(axis)
+    if frame == "physical":
+        return "%", 100.0
+    return ("deg", 180 / math.pi) if name in ANGULAR_AXES else ("mm", 1000.0)
+
+
 def parse_axis_values(values: object, prefix: str) -> dict[str, float]:
     """Read ``{axis: quantity}`` with the unit kind each axis needs (length or angle)."""
     if values is None:
