@@ -66,7 +66,7 @@ def make_particle(task: Task, offsets: Mapping[str, float]) -> Particle:
 
 def initial_belief(task: Task) -> tuple[Particle, ...]:
     """The task's initial belief, by its generator (deterministic: seeded where random)."""
-    bounds = {k: v for k, v in task.spec.uncertainty.items() if v > 0}
+    bounds = task.bounds
     spec = task.spec.belief
     if isinstance(spec, ExplicitBelief):
         offsets = [
