@@ -66,7 +66,7 @@ def make_particle(task: Task, offsets: Mapping[str, float]) -> Particle:
 
 def initial_belief(task: Task) -> tuple[Particle, ...]:
     """The task's initial belief, by its generator (deterministic: seeded where random)."""
-    bounds = task.bounds
+    bounds = task.spec.bounds
     spec = task.spec.belief
     if isinstance(spec, ExplicitBelief):
         offsets = [

@@ -171,7 +171,7 @@ def check_belief(task: Task, particles: tuple[Particle, ...]) -> Belief | None:
     f = robust_friction(task)
     if f == 0:
         return None
-    drawn = random_offsets(task.bounds, task.spec.planner.check_random, seed=CHECK_SEED)
+    drawn = random_offsets(task.spec.bounds, task.spec.planner.check_random, seed=CHECK_SEED)
     check = [
         make_particle(task, {**offsets, "friction": scale})
         for offsets, scales in [

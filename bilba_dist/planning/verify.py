@@ -37,7 +37,7 @@ def verify_particles(task: Task, friction_margin: float) -> tuple[Particle, ...]
     the fine step where the task plans at a coarser one (task/timestep.py): the ones a plan
     loses become check particles, and stay at that step."""
     f = friction_margin
-    drawn = random_offsets(task.bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED)
+    drawn = random_offsets(task.spec.bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED)
     step = verify_timestep(task.timestep_s)
     return tuple(
         replace(
@@ -81,7 +81,7 @@ def verify(
     }
     passed = min(held.values()) >= task.spec.planner.verify_min
     failed = [p for p, good in zip(particles, ok, strict=True) if not good]
-    bounded = list(task.bounds)
+    bounded = list(task.spec.bounds)
     lost: list[dict[str, float]] = []
     for p in failed:  # the uncertain axes' offsets (not a robust-acceptance twin's friction)
         offsets = {k: p.offsets.get(k, 0.0) for k in bounded}
@@ -115,9 +115,9 @@ def more_particles_hint(task: Task, verification: Verification) -> str:
         knob = f"belief: {{random: {belief.random + 4}}} draws more of them"
     else:
         knob = "add offsets like these to belief.particles"
-    axes = list(task.bounds)
     mapped = " ".join(
-        f"--map {k}={_number(k, task.spec.uncertainty[k], sign='')}{_unit(k)}" for k in axes[:2]
+        f"--map {k}={_number(k, v, sign='')}{_unit(k)}"
+        for k, v in list(task.spec.bounds.items())[:2]
     )
     where = f"; `bilba validate PLAN {mapped}` shows where it fails" if mapped else ""
     return (

@@ -78,7 +78,7 @@ def validate_plan(
     """Replay ``motions`` on the task's planning belief and on ``held_out`` more particles
     drawn uniformly inside its uncertainty ellipsoid (seeded), in one batch per motion."""
     planning = initial_belief(task)
-    extra = tuple(make_particle(task, o) for o in random_offsets(task.bounds, held_out, seed))
+    extra = tuple(make_particle(task, o) for o in random_offsets(task.spec.bounds, held_out, seed))
     final = replay(task, motions, planning + extra, backend)
     n = len(planning)
     return Validation(

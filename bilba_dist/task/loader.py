@@ -60,12 +60,6 @@ class Task:
         return step
 
     @property
-    def bounds(self) -> dict[str, float]:
-        """The uncertain axes and their bounds: the uncertainty's axes with a bound above 0,
-        in the task file's order (an axis overridden to 0 is certain)."""
-        return {k: v for k, v in self.spec.uncertainty.items() if v > 0}
-
-    @property
     def hash(self) -> str:
         """SHA-256 of the validated task (after overrides), in canonical JSON."""
         canonical = json.dumps(self.spec.model_dump(mode="json"), sort_keys=True)

@@ -370,6 +370,12 @@ class TaskSpec(Strict):
             raise ValueError(f"uncertainty bounds must be >= 0: {', '.join(negative)}")
         return values
 
+    @property
+    def bounds(self) -> dict[str, float]:
+        """The uncertain axes and their bounds: the uncertainty's axes with a bound above 0,
+        in the task file's order (an axis overridden to 0 is certain)."""
+        return {k: v for k, v in self.uncertainty.items() if v > 0}
+
     @model_validator(mode="after")
     def _piece_pairs(self) -> "TaskSpec":
         # as listed: a mesh piece may hold several objects, counted again once loaded
@@ -380,7 +386,7 @@ class TaskSpec(Strict):
 
     @model_validator(mode="after")
     def _particle_count(self) -> "TaskSpec":
-        n = particle_count(self.belief, sum(v > 0 for v in self.uncertainty.values()))
+        n = particle_count(self.belief, len(self.bounds))
         if n > MAX_PARTICLES:
             raise ValueError(
                 f"belief: {n} particles, over the limit of {MAX_PARTICLES} (each costs a "
