@@ -76,6 +76,10 @@ TASKS: dict[str, tuple[str | bytes, str]] = {
     "UTF-16": (PEG.encode("utf-16"), "UTF-16"),
     "deep nesting": (PEG + "extra: " + "[" * 5000 + "]" * 5000 + "\n", "nested deeper"),
     "100001 points": (edited("generator: axis ", "points: 100001\n  generator: axis "), "points"),
+    "unknown generator": (
+        edited("generator: axis ", "generator: gaussian "),
+        "belief: write a mapping whose generator is axis (the default), extremal+random or",
+    ),
     "1 km bound": (edited("grasp.pitch: 2deg", "grasp.x: 1000m"), "outside"),
     "720 degree bound": (edited("grasp.pitch: 2deg", "grasp.pitch: 720deg"), "outside"),
     "1e308 m bound": (edited("grasp.pitch: 2deg", "grasp.x: 1e308m"), "far outside ±10 cm"),

@@ -14,12 +14,13 @@ from bilba_dist.planning import bilba, verify
 from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.make_contact import Step
 from bilba_dist.planning.verify import VERIFY_SEED, verify_particles, within_budget
+from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import run_motions
 from bilba_dist.record.reader import read_log
 from bilba_dist.rollout import Motion
-from bilba_dist.task.loader import with_planner, with_preset
+from bilba_dist.task.loader import with_planner, with_points, with_preset
 from bilba_dist.workers.rollout_worker import RolloutWorker
-from tests.conftest import prism_task, write_task
+from tests.conftest import prism_file, prism_task, write_task
 from tests.test_task_files import run_cli
 
 
@@ -295,7 +296,7 @@ def test_a_plan_that_fails_verification_is_repaired_from_the_contact_both_made(m
     """The first plan loses a particle at 3x friction (stuck on the chamfer both reach with
     its first motion): the search goes on from that chamfer, the lost particle a check
     particle there, rather than from the start."""
-    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
+    task = with_points(with_planner(load_task("peg-in-hole"), verify_effort=2.0), 3)  # no restart
     sticky = make_particle(task, {"friction": 2.0})
     monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
     events = _watch_repair(monkeypatch)
@@ -312,6 +313,7 @@ def test_a_task_of_our_own_is_repaired_from_a_contact_of_its_refused_plan(tmp_pa
     goal) is not started over with, but taken on from a contact of the refused plan that it
     made too, where it joins the check particles."""
     task = prism_task(tmp_path, 8, 0.006, {"verify_effort": 2.0}, {"grasp.x": "1cm"})
+    task = with_points(task, 3)  # its own points: repaired, not restarted on more
     sticky = make_particle(task, {"friction": 9.0})
     monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (sticky,))
     events = _watch_repair(monkeypatch)
@@ -320,3 +322,99 @@ def test_a_task_of_our_own_is_repaired_from_a_contact_of_its_refused_plan(tmp_pa
     assert kind == "from" and mode != str(FREE)
     assert mode in refused[:-1]  # a contact of the refused plan before the goal
     assert offsets == sticky.offsets
+
+
+def test_a_task_that_leaves_its_points_to_the_default_may_restart_on_two_more(tmp_path):
+    """The restart's rule: only the axis belief's default points (our own prism task, the
+    peg's `belief: {generator: axis}`), with verification on and bounds to verify; a task
+    file's own points, another generator or the authors' preset are planned on as given.
+    The rule survives the pickling that sends a task to a Ray worker."""
+    import pickle
+    from dataclasses import replace
+
+    import yaml
+
+    prism = prism_task(tmp_path, 6, 0.002)
+    assert verify.raised_points(prism) == 5
+    assert verify.raised_points(load_task("peg-in-hole", ["grasp.x=1cm", "env.y=1cm"])) == 5
+    spec = pickle.loads(pickle.dumps(prism.spec))
+    assert verify.raised_points(replace(prism, spec=spec)) == 5
+    assert verify.raised_points(load_task("puzzle")) is None  # its file says points: 5
+    data = yaml.safe_load(prism_file(tmp_path, 6, 0.002).read_text())
+    for belief in ({"generator": "axis", "points": 3}, {"generator": "extremal+random"}):
+        assert verify.raised_points(load_task({**data, "belief": belief})) is None
+    assert verify.raised_points(with_preset(prism, "paper")) is None  # verifies nothing
+    assert verify.raised_points(load_task({**data, "uncertainty": {}})) is None
+    raised = with_points(prism, 5)
+    assert len(initial_belief(raised)) == 5 and verify.raised_points(raised) is None
+    assert raised.manipuland is prism.manipuland  # only the belief differs
+
+
+def test_only_offsets_inside_the_bounds_are_between_the_particles():
+    task = load_task("peg-in-hole", ["grasp.x=1cm"])
+    assert verify.between(task, list(verify_particles(task, 0.5)))  # drawn inside, 3 frictions
+    assert verify.between(task, [make_particle(task, {"grasp.x": -0.01, "friction": 2.0})])
+    assert not verify.between(task, [make_particle(task, {"grasp.x": 0.012})])  # beyond
+    assert not verify.between(task, [make_particle(task, {"env.y": 0.001})])  # certain axis
+
+
+def _friction_lost(monkeypatch, task):
+    """Verification on the nominal offset at 3x friction, where the peg's plans stick on the
+    chamfer: every plan fails it (offsets inside the bounds: a twin's friction aside)."""
+    stuck = make_particle(task, {"friction": 2.0})
+    monkeypatch.setattr(bilba, "verify_particles", lambda task, f: (make_particle(task, {}), stuck))
+
+
+def test_a_first_plan_that_fails_verification_between_the_particles_restarts_on_five(
+    monkeypatch,
+):
+    """The peg on its default 3 particles: its first plan fails verification, so the search
+    starts again on 5 within the same deadline, counting both searches' rollouts and plans;
+    with none passing by verify_effort, the best comes back marked failed, for the task on 5.
+    The same search on a task file's own `points: 3` is planned on 3 to the end."""
+    import yaml
+
+    from bilba_dist.task.loader import builtin_tasks
+
+    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
+    worker = RolloutWorker(task)
+    _friction_lost(monkeypatch, task)
+    result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=120)
+    assert result.task is not None and len(initial_belief(result.task)) == 5
+    assert result.task.spec.belief.points == 5 and result.task.spec.planner == task.spec.planner
+    check = result.verification
+    assert result.success and check is not None and not check.passed and check.plans >= 2
+    assert result.reason.startswith("no plan passed verification within 2x the time")
+    assert "belief: {points: 7}" in result.reason  # the hint reads the task planned on
+
+    data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
+    own = with_planner(load_task({**data, "belief": {"points": 3}}), verify_effort=2.0)
+    kept = plan(own, worker, "bilba-fixed", seed=0, timeout_s=120)
+    assert kept.task is own and kept.verification is not None and not kept.verification.passed
+    assert "belief: {points: 5}" in kept.reason
+    assert result.rollouts > kept.rollouts  # the first search's rollouts are counted too
+
+
+def test_a_restarted_plan_embeds_its_task_and_its_log_says_why(tmp_path, monkeypatch, peg_yaml):
+    """`bilba plan` prints the restart, the plan file embeds the task on 5 particles (so
+    `bilba validate` replays those) and the log has a /restart message before the start
+    belief is drawn again."""
+    _friction_lost(monkeypatch, load_task("peg-in-hole"))
+    out, log = tmp_path / "p.json", tmp_path / "l.mcap"
+    path = write_task(tmp_path, {**peg_yaml, "planner": {"verify_effort": 2.0}})
+    result = run_cli("plan", str(path), "--planner", "bilba-fixed", "--workers", "0",
+                     "--out", str(out), "--log", str(log))  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "belief     restarted on 5 particles a bounded axis (5 in all)" in result.output
+    document = json.loads(out.read_text())
+    assert document["task"]["spec"]["belief"]["points"] == 5
+    assert read_plan(out).task().spec.belief.points == 5
+    messages = read_log(log)
+    (restart,) = messages.json("/restart")
+    assert restart["points"] == 5 and restart["particles"] == 5
+    assert restart["reason"].startswith("a plan failed verification on")
+    topics = [topic for topic, _, _ in messages.records]
+    restarted = topics.index("/restart")
+    assert "/verify" in topics[:restarted] and "/scene" in topics[restarted:]
+    validated = run_cli("validate", str(out))
+    assert " of 5 reach " in validated.output, validated.output

@@ -31,7 +31,7 @@ from bilba_dist.robot.drivers import DRIVER_NAMES
 from bilba_dist.robot.gripper import too_wide
 from bilba_dist.rollout import DynamicsModel
 from bilba_dist.task.loader import Task, load_task, with_planner, with_preset
-from bilba_dist.task.schema import PRESETS
+from bilba_dist.task.schema import PRESETS, AxisBelief, particle_count
 from bilba_dist.task.timestep import verify_timestep
 
 EXIT_NO_PLAN = 1
@@ -268,7 +268,8 @@ def plan_portfolio(
         sys.exit(EXIT_NO_PLAN)
 
 
-def summary(result: PlanResult, task: Task, out: Path) -> None:
+def summary(result: PlanResult, given: Task, out: Path) -> None:
+    task = result.task or given
     bounds = ", ".join(f"{k}={v:g}" for k, v in task.spec.uncertainty.items()) or "none"
     click.echo(f"task       {task.name} ({task.hash[:12]}), uncertainty {bounds}")
     step, verify_step = task.timestep_s, verify_timestep(task.timestep_s)
@@ -277,6 +278,12 @@ def summary(result: PlanResult, task: Task, out: Path) -> None:
     if verifies and verify_step != step:
         physics += f", verified at {1 / verify_step:.4g} Hz"
     click.echo(f"planner    {result.planner}, seed {result.seed}, {physics}")
+    if isinstance(belief := task.spec.belief, AxisBelief) and belief != given.spec.belief:
+        n = particle_count(belief, len(task.spec.bounds))
+        click.echo(
+            f"belief     restarted on {belief.points} particles a bounded axis ({n} in all): "
+            "the first plan lost offsets between the default's"
+        )
     status = "plan found" if result.success else f"NO PLAN: {result.reason}"
     click.echo(f"outcome    {status}")
     click.echo(

@@ -8,7 +8,7 @@ from the last of its contacts that the particles it lost made too (``resume_at``
 import itertools
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -35,12 +35,14 @@ from bilba_dist.planning.make_contact import (
     race,
 )
 from bilba_dist.planning.recorder import NullRecorder, Recorder
-from bilba_dist.planning.result import PlannedMotion, PlanResult
+from bilba_dist.planning.result import PlannedMotion, PlanResult, Verification
 from bilba_dist.planning.setpoints import SetpointParams
 from bilba_dist.planning.stiffness import driver_fit, fixed_stiffness, variable_stiffness
 from bilba_dist.planning.verify import (
     ADD_CHECKS,
+    between,
     more_particles_hint,
+    raised_points,
     verify,
     verify_particles,
     with_more_checks,
@@ -49,7 +51,7 @@ from bilba_dist.planning.verify import (
 from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend, require_world
-from bilba_dist.task.loader import Task
+from bilba_dist.task.loader import Task, with_points
 
 Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
 PLANNERS: tuple[Variant, ...] = ("bilba-variable", "bilba-fixed", "b-est")
@@ -86,24 +88,82 @@ def plan(
         if result.success and validate_on is not None:
             b0 = start_belief(task, initial_belief(task))
             _validate(task, result, b0, validate_on)
+        result.task = task
         return result
     clock = time.perf_counter
     started = clock()
-    rng = np.random.default_rng(seed)
+    deadline = started + (timeout_s if timeout_s is not None else task.spec.planner.timeout_s)
+    evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
+    search = _Search(task, evaluator, variant, seed, started, deadline, progress, recorder)
+    try:
+        result = _search(search, more_points=raised_points(task))
+    except MoreParticlesError as exc:  # the first plan lost offsets between the particles
+        task = with_points(task, exc.points)
+        (recorder or NullRecorder()).restarted(exc.points, len(initial_belief(task)), exc.reason)
+        search = replace(search, task=task)
+        result = _search(search, more_points=None, failed=exc.failed)
+    if result.success and validate_on is not None:
+        b0 = start_belief(task, planning_particles(task, initial_belief(task)))
+        _validate(task, result, b0, validate_on)
+    result.planning_time_s = clock() - started
+    result.rollouts = evaluator.rollouts
+    result.task = task
+    return result
+
+
+@dataclass(frozen=True)
+class _Search:
+    """One search's inputs; a restart on more particles runs a second with its task."""
+
+    task: Task
+    evaluator: Evaluator
+    variant: Variant
+    seed: int
+    started: float
+    deadline: float
+    progress: Progress
+    recorder: Recorder | None
+
+
+class MoreParticlesError(Exception):
+    """The first plan of a search on the default axis belief failed verification on offsets
+    between its particles: plan again on ``points`` a bounded axis (``raised_points``),
+    keeping ``failed`` (the plan, its verification) as the best unverified plan so far."""
+
+    def __init__(
+        self, points: int, reason: str, failed: tuple[list[PlannedMotion], Verification]
+    ) -> None:
+        super().__init__(reason)
+        self.points, self.reason, self.failed = points, reason, failed
+
+
+def _search(
+    inputs: _Search,
+    more_points: int | None,
+    failed: tuple[list[PlannedMotion], Verification] | None = None,
+) -> PlanResult:
+    """Search ``inputs.task`` to its deadline. With ``more_points``, a first plan that fails
+    verification on offsets inside the bounds raises MoreParticlesError; ``failed``: a plan
+    from an earlier search on fewer particles, returned if no better one is found."""
+    task, clock, started, deadline = inputs.task, time.perf_counter, inputs.started, inputs.deadline
+    progress = inputs.progress
+    rng = np.random.default_rng(inputs.seed)
     params = task.spec.planner
     particles = initial_belief(task)
     panda = PandaModel(arms=planning_arms(task.spec.planner.driver))
     b0 = start_belief(task, planning_particles(task, particles))
     b0 = b0.with_check(check_belief(task, particles))
-    result = PlanResult(False, "", [], variant, seed)
-    evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
-    deadline = started + (timeout_s if timeout_s is not None else params.timeout_s)
-    search = contact_search(task, evaluator, variant, deadline, clock, recorder)
+    result = PlanResult(False, "", [], inputs.variant, inputs.seed)
+    if failed is not None:
+        result.unverified, result.verification = failed, failed[1]
+    search = contact_search(
+        task, inputs.evaluator, inputs.variant, deadline, clock, inputs.recorder
+    )
     search.on_progress = lambda contact, best: _show(progress, contact, best)
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
-        _attempts(task, graph, b0, search, rng, result, panda, verifying, started)
+        _attempts(task, graph, b0, search, rng, result, panda, verifying, started, more_points)
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
@@ -134,10 +194,6 @@ def plan(
             result.reason += f"; {hint}"
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
-    if result.success and validate_on is not None:
-        _validate(task, result, b0, validate_on)
-    result.planning_time_s = clock() - started
-    result.rollouts = evaluator.rollouts
     return result
 
 
@@ -246,6 +302,7 @@ def _attempts(
     panda: PandaModel,
     verifying: tuple[Particle, ...],
     started: float,
+    more_points: int | None = None,
 ) -> None:
     params = task.spec.planner
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
@@ -291,6 +348,10 @@ def _attempts(
                     limit = started + params.verify_effort * result.first_plan_s
                     search.deadline = min(search.deadline, limit)
                 lost = _verify(task, motions, verifying, search, result) if verifying else []
+                first = result.verification is not None and result.verification.plans == 1
+                if lost and more_points is not None and first and between(task, lost):
+                    assert result.unverified is not None  # _verify keeps the plan it failed
+                    raise MoreParticlesError(more_points, result.reason, result.unverified)
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
                     added += lost[:ADD_CHECKS]

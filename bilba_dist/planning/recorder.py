@@ -30,6 +30,8 @@ class Recorder(Protocol):
 
     def verified(self, verification: Verification) -> None: ...
 
+    def restarted(self, points: int, particles: int, reason: str) -> None: ...
+
 
 class NullRecorder:
     """Records nothing (``--no-log``)."""
@@ -47,4 +49,7 @@ class NullRecorder:
         pass
 
     def verified(self, verification: Verification) -> None:
+        pass
+
+    def restarted(self, points: int, particles: int, reason: str) -> None:
         pass

@@ -1,7 +1,7 @@
 """What a planner returns: always a result that says whether it worked and why not."""
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pinocchio as pin
@@ -9,6 +9,9 @@ import pinocchio as pin
 from bilba_dist.belief.state import Belief
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.planning.diagnosis import Blocked
+
+if TYPE_CHECKING:
+    from bilba_dist.task.loader import Task
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,10 @@ class PlanResult:
     unverified: tuple[list[PlannedMotion], Verification] | None = None
     #: Whether the search ended at its deadline (the timeout, or verify_effort's).
     timed_out: bool = False
+    #: The task planned on: the one given, or it on more particles a bounded axis when the
+    #: first plan failed verification between them (planning/bilba.py ``plan``); None from
+    #: a planner that does not say.
+    task: "Task | None" = None
 
     def outcome(self) -> dict[str, Any]:
         """Success, why not, time, rollouts and whether the plan passed verification (None:

@@ -19,7 +19,13 @@ from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion, Verification
 from bilba_dist.rollout import RolloutBackend
 from bilba_dist.task.loader import Task
-from bilba_dist.task.schema import AxisBelief, ExtremalRandomBelief, axis_unit
+from bilba_dist.task.schema import (
+    MAX_PARTICLES,
+    AxisBelief,
+    ExtremalRandomBelief,
+    axis_unit,
+    particle_count,
+)
 from bilba_dist.task.timestep import verify_timestep
 
 #: The verification draw: neither the check particles' (7) nor `bilba validate`'s usual
@@ -46,6 +52,38 @@ def verify_particles(task: Task, friction_margin: float) -> tuple[Particle, ...]
         )
         for o in drawn
         for scale in ((-f, 0.0, f) if f > 0 else (0.0,))
+    )
+
+
+def raised_points(task: Task) -> int | None:
+    """The particles a bounded axis a search starts again on when its first plan fails
+    verification on offsets between its particles (``between``): two more than the axis
+    belief's default, when the task leaves its points to the default and verifies its plans.
+    None for a belief the task file chose (planned on as it is), the authors' preset (no
+    verification) or one over MAX_PARTICLES."""
+    belief, bounds = task.spec.belief, task.spec.bounds
+    if not isinstance(belief, AxisBelief) or "points" in belief.model_fields_set:
+        return None
+    if not bounds or task.spec.planner.verify_particles == 0:
+        return None
+    points = belief.points + 2
+    return (
+        points if particle_count(AxisBelief(points=points), len(bounds)) <= MAX_PARTICLES else None
+    )
+
+
+def between(task: Task, lost: list[Particle]) -> bool:
+    """Whether every particle of ``lost`` lies inside the bounds (offsets on the uncertain
+    axes only, each within its bound; a robust-acceptance twin's friction aside): the
+    offsets more particles a bounded axis would plan on."""
+    bounds = task.spec.bounds
+    return all(
+        all(
+            abs(v) <= bounds.get(k, 0.0) * (1 + 1e-9)
+            for k, v in p.offsets.items()
+            if v and not (k == "friction" and "friction" not in bounds)
+        )
+        for p in lost
     )
 
 

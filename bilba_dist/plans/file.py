@@ -52,9 +52,12 @@ FRAMES = {
 
 
 def plan_document(result: PlanResult, task: Task) -> dict[str, Any]:
+    """The plan file of ``result``, a plan for ``task``: it embeds the task planned on (the
+    result's, where the planner raised its particles), which `bilba validate` replays."""
     from bilba_dist.belief.particles import initial_belief
     from bilba_dist.belief.start import start_state
 
+    task = result.task or task
     particles = initial_belief(task)
     nominal = next((p for p in particles if not any(p.offsets.values())), particles[0])
     settings, planner = SimSettings(), task.spec.planner

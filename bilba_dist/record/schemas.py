@@ -112,6 +112,14 @@ TOPICS: dict[str, dict[str, Any]] = {
         },
         "bilba.Verify",
     ),
+    "/restart": _object(
+        {
+            "points": {"type": "integer"},
+            "particles": {"type": "integer"},
+            "reason": {"type": "string"},
+        },
+        "bilba.Restart",
+    ),
     "/plan": {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "bilba.Plan",

@@ -88,6 +88,7 @@ class LogWriter:
         self._scene = SceneMessages(task.manipuland, task.environment, robot)
         self._sequence = 0
         self.transitions = 0
+        self._start_drawn = False
         header = {
             "task": {
                 "name": task.name,
@@ -137,8 +138,9 @@ class LogWriter:
         count: int,
         accepted: bool,
     ) -> None:
-        if self.transitions == 0:
-            self.draw(before)  # the start belief
+        if not self._start_drawn:
+            self.draw(before)  # the start belief (again after a restart on more particles)
+            self._start_drawn = True
         self.write(
             "/transition",
             {
@@ -190,6 +192,13 @@ class LogWriter:
 
     def verified(self, verification: Verification) -> None:
         self.write("/verify", verification_json(verification))
+        self.commit()
+
+    def restarted(self, points: int, particles: int, reason: str) -> None:
+        """The search starts again on ``points`` particles a bounded axis (``particles`` in
+        all): its start belief is drawn again at its next transition."""
+        self.write("/restart", {"points": points, "particles": particles, "reason": reason})
+        self._start_drawn = False
         self.commit()
 
     def finish(self, plan_text: str, outcome: dict[str, Any]) -> None:

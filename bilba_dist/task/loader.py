@@ -3,7 +3,7 @@
 import hashlib
 import json
 from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from os import PathLike
 from pathlib import Path
@@ -22,6 +22,7 @@ from bilba_dist.task.schema import (
     MAX_PIECES,
     PAPER_PLANNER,
     PRESETS,
+    AxisBelief,
     ConvexSpec,
     PartSpec,
     PlannerParams,
@@ -198,6 +199,12 @@ def with_friction(task: Task, factor: float) -> Task:
     """``task`` with its friction coefficient times ``factor`` (> 0)."""
     spec = task.spec.model_copy(update={"friction": task.spec.friction * factor})
     return build_task(spec, task.source)
+
+
+def with_points(task: Task, points: int) -> Task:
+    """``task`` on the axis belief of ``points`` particles a bounded axis (its parts as they
+    are: only the belief differs)."""
+    return replace(task, spec=task.spec.model_copy(update={"belief": AxisBelief(points=points)}))
 
 
 def with_preset(task: Task, preset: str) -> Task:

@@ -11,7 +11,9 @@ from typing import Annotated, Any, Literal
 from pydantic import (
     BaseModel,
     ConfigDict,
+    Discriminator,
     Field,
+    Tag,
     ValidationInfo,
     field_validator,
     model_validator,
@@ -188,8 +190,24 @@ class ExplicitBelief(Strict):
     particles: list[ParticleOffset] = Field(min_length=1, max_length=MAX_PARTICLES)
 
 
+def _generator(belief: object) -> object:
+    """The belief's generator; ``axis`` when a mapping leaves it out (``belief: {points:
+    5}``, as the verification warning advises)."""
+    if isinstance(belief, dict):
+        return belief.get("generator", "axis")
+    return getattr(belief, "generator", None)
+
+
 BeliefSpec = Annotated[
-    AxisBelief | ExtremalRandomBelief | ExplicitBelief, Field(discriminator="generator")
+    Annotated[AxisBelief, Tag("axis")]
+    | Annotated[ExtremalRandomBelief, Tag("extremal+random")]
+    | Annotated[ExplicitBelief, Tag("explicit")],
+    Discriminator(
+        _generator,
+        custom_error_type="belief_generator",
+        custom_error_message="write a mapping whose generator is axis (the default), "
+        "extremal+random or explicit",
+    ),
 ]
 
 
