@@ -95,18 +95,22 @@ def plan(
     deadline = started + (timeout_s if timeout_s is not None else task.spec.planner.timeout_s)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
     search = _Search(task, evaluator, variant, seed, started, deadline, progress, recorder)
+    spent = 0  # by a search restarted on more particles
     try:
         result = _search(search, more_points=raised_points(task))
     except MoreParticlesError as exc:  # the first plan lost offsets between the particles
-        task = with_points(task, exc.points)
+        task, spent = with_points(task, exc.points), evaluator.rollouts
         (recorder or NullRecorder()).restarted(exc.points, len(initial_belief(task)), exc.reason)
-        search = replace(search, task=task)
+        # a search of its own (its verification's share and effort limit count from here),
+        # to the same deadline
+        evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
+        search = replace(search, task=task, evaluator=evaluator)
         result = _search(search, more_points=None, failed=exc.failed)
     if result.success and validate_on is not None:
         b0 = start_belief(task, planning_particles(task, initial_belief(task)))
         _validate(task, result, b0, validate_on)
     result.planning_time_s = clock() - started
-    result.rollouts = evaluator.rollouts
+    result.rollouts = spent + evaluator.rollouts
     result.task = task
     return result
 
@@ -119,7 +123,7 @@ class _Search:
     evaluator: Evaluator
     variant: Variant
     seed: int
-    started: float
+    started: float  # when the plan began (a timeout's reason counts from there)
     deadline: float
     progress: Progress
     recorder: Recorder | None
@@ -146,6 +150,7 @@ def _search(
     verification on offsets inside the bounds raises MoreParticlesError; ``failed``: a plan
     from an earlier search on fewer particles, returned if no better one is found."""
     task, clock, started, deadline = inputs.task, time.perf_counter, inputs.started, inputs.deadline
+    since = clock()  # this search's start (a restart's is later than the plan's)
     progress = inputs.progress
     rng = np.random.default_rng(inputs.seed)
     params = task.spec.planner
@@ -163,7 +168,7 @@ def _search(
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
-        _attempts(task, graph, b0, search, rng, result, panda, verifying, started, more_points)
+        _attempts(task, graph, b0, search, rng, result, panda, verifying, since, more_points)
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
