@@ -52,6 +52,7 @@ from bilba_dist.robot.drivers import planning_arms
 from bilba_dist.robot.panda import PandaModel
 from bilba_dist.rollout import RolloutBackend, require_world
 from bilba_dist.task.loader import Task, with_points
+from bilba_dist.task.schema import particle_count
 
 Variant = Literal["bilba-variable", "bilba-fixed", "b-est"]
 PLANNERS: tuple[Variant, ...] = ("bilba-variable", "bilba-fixed", "b-est")
@@ -94,21 +95,21 @@ def plan(
     started = clock()
     deadline = started + (timeout_s if timeout_s is not None else task.spec.planner.timeout_s)
     evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
-    search = _Search(task, evaluator, variant, seed, started, deadline, progress, recorder)
+    search = _Search(
+        task, evaluator, variant, seed, started, deadline, progress, recorder, validate_on
+    )
     spent = 0  # by a search restarted on more particles
     try:
         result = _search(search, more_points=raised_points(task))
     except MoreParticlesError as exc:  # the first plan lost offsets between the particles
         task, spent = with_points(task, exc.points), evaluator.rollouts
-        (recorder or NullRecorder()).restarted(exc.points, len(initial_belief(task)), exc.reason)
+        particles = particle_count(task.spec.belief, len(task.spec.bounds))
+        (recorder or NullRecorder()).restarted(exc.points, particles, exc.reason)
         # a search of its own (its verification's share and effort limit count from here),
         # to the same deadline
         evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
         search = replace(search, task=task, evaluator=evaluator)
         result = _search(search, more_points=None, failed=exc.failed)
-    if result.success and validate_on is not None:
-        b0 = start_belief(task, planning_particles(task, initial_belief(task)))
-        _validate(task, result, b0, validate_on)
     result.planning_time_s = clock() - started
     result.rollouts = spent + evaluator.rollouts
     result.task = task
@@ -127,6 +128,7 @@ class _Search:
     deadline: float
     progress: Progress
     recorder: Recorder | None
+    validate_on: RolloutBackend | None
 
 
 class MoreParticlesError(Exception):
@@ -199,6 +201,8 @@ def _search(
             result.reason += f"; {hint}"
     if not result.success and result.blocked:
         result.reason += f"; {explain(result.blocked)}"
+    if result.success and inputs.validate_on is not None:
+        _validate(task, result, b0, inputs.validate_on)
     return result
 
 

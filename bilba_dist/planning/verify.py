@@ -78,13 +78,19 @@ def between(task: Task, lost: list[Particle]) -> bool:
     offsets more particles a bounded axis would plan on."""
     bounds = task.spec.bounds
     return all(
-        all(
-            abs(v) <= bounds.get(k, 0.0) * (1 + 1e-9)
-            for k, v in p.offsets.items()
-            if v and not (k == "friction" and "friction" not in bounds)
-        )
+        all(abs(v) <= bounds.get(k, 0.0) * (1 + 1e-9) for k, v in pose_offsets(task, p).items())
         for p in lost
     )
+
+
+def pose_offsets(task: Task, particle: Particle) -> dict[str, float]:
+    """``particle``'s offsets on the uncertain axes (0 where it has none) and on any other
+    it was given, but not a robust-acceptance twin's friction (friction is then no axis)."""
+    bounded = task.spec.bounds
+    offsets = {k: particle.offsets.get(k, 0.0) for k in bounded}
+    return offsets | {
+        k: v for k, v in particle.offsets.items() if k not in bounded and k != "friction"
+    }
 
 
 def within_budget(
@@ -119,11 +125,9 @@ def verify(
     }
     passed = min(held.values()) >= task.spec.planner.verify_min
     failed = [p for p, good in zip(particles, ok, strict=True) if not good]
-    bounded = list(task.spec.bounds)
     lost: list[dict[str, float]] = []
-    for p in failed:  # the uncertain axes' offsets (not a robust-acceptance twin's friction)
-        offsets = {k: p.offsets.get(k, 0.0) for k in bounded}
-        offsets |= {k: v for k, v in p.offsets.items() if k not in bounded and k != "friction"}
+    for p in failed:
+        offsets = pose_offsets(task, p)
         if offsets not in lost:
             lost.append(offsets)
     return Verification(len(particles), held, passed, lost=lost), failed
