@@ -264,6 +264,36 @@ def test_a_plan_that_lost_a_particle_resumes_from_the_last_contact_that_particle
     assert again.particles == joined.particles
 
 
+def test_a_restarted_search_goes_on_from_the_contacts_its_new_particles_made(fixed_peg_plan):
+    """A restart on 5 particles replays the plan on 3 that failed verification from the new
+    start belief, check particles included, and goes on from the last of its contacts
+    that every one of them made; a belief that makes none of them starts over."""
+    from bilba_dist.modes.schedule import belief_graph
+
+    task, worker, result = fixed_peg_plan
+    steps, reached = _made(task, result.motions, worker)
+    raised = with_points(task, 5)
+    particles = initial_belief(raised)
+    b0 = start_belief(raised, bilba.planning_particles(raised, particles))
+    b0 = b0.with_check(bilba.check_belief(raised, particles))
+    evaluator = Evaluator(worker)
+    search = bilba.contact_search(raised, evaluator, "bilba-fixed", deadline=float("inf"))
+    graph, _ = belief_graph(raised, particles, raised.X_WG0, search.cache)
+    made = bilba.restart_at(search, graph, b0, steps, reached)
+    assert made is not None and made[0].belief is b0 and made[0].mode == FREE
+    assert [r.mode for r in made[1:]] == [r.mode for r in reached[1:-1]]  # all but the goal
+    assert [r.steps for r in made] == [0, 1, 2]
+    last = made[-1].belief
+    assert last.particles == b0.particles and last.check is not None
+    assert last.check.particles == b0.check.particles  # the 10 twins carried along
+    assert last.count(frozenset([reached[2].mode, task.goal])) == 5
+    assert last.check.count(frozenset([reached[2].mode, task.goal])) == 10
+    assert evaluator.rollouts == 2 * 15  # two motions on 5 particles and their 10 twins
+
+    aside = start_belief(raised, [make_particle(raised, {"grasp.x": 0.02})])  # on a wall top
+    assert bilba.restart_at(search, graph, aside, steps, reached) is None
+
+
 def _watch_repair(monkeypatch) -> list[tuple]:
     """Spy on a search: ("verified", the plan's contacts, whether it lost particles) after
     each verification, ("from", mode, the last check particle's offsets) at each contact
@@ -416,5 +446,8 @@ def test_a_restarted_plan_embeds_its_task_and_its_log_says_why(tmp_path, monkeyp
     topics = [topic for topic, _, _ in messages.records]
     restarted = topics.index("/restart")
     assert "/verify" in topics[:restarted] and "/scene" in topics[restarted:]
+    (resume,) = messages.json("/resume")  # the 5 made the first plan's chamfer contact too
+    assert resume["motions"] >= 1 and topics.index("/resume") > restarted
+    assert f"resumed at {resume['contact']}" in result.output
     validated = run_cli("validate", str(out))
     assert " of 5 reach " in validated.output, validated.output

@@ -280,9 +280,13 @@ def summary(result: PlanResult, given: Task, out: Path) -> None:
     click.echo(f"planner    {result.planner}, seed {result.seed}, {physics}")
     if isinstance(belief := task.spec.belief, AxisBelief) and belief != given.spec.belief:
         n = particle_count(belief, len(task.spec.bounds))
+        resumed = ""
+        if result.resumed is not None:
+            contact, motions = result.resumed
+            resumed = f"; resumed at {contact}, which its first {motions} motion(s) made for all"
         click.echo(
             f"belief     restarted on {belief.points} particles a bounded axis ({n} in all): "
-            "the first plan lost offsets between the default's"
+            f"the first plan lost offsets between the default's{resumed}"
         )
     status = "plan found" if result.success else f"NO PLAN: {result.reason}"
     click.echo(f"outcome    {status}")

@@ -3,11 +3,13 @@ each contact with MakeContact, replan after each contact reached, prune an edge 
 and go on from the contact reached while a schedule from it is left (``keep_reached``; the
 paper starts over from the initial belief, as we do when none is), up to ``n_attempts`` or
 the timeout. A plan that fails verification is repaired the same way: the search goes on
-from the last of its contacts that the particles it lost made too (``resume_at``)."""
+from the last of its contacts that the particles it lost made too (``resume_at``), and a
+search restarted on more particles goes on from the last contact of the failed plan that
+they all made (``restart_at``)."""
 
 import itertools
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -109,7 +111,7 @@ def plan(
         # to the same deadline
         evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
         search = replace(search, task=task, evaluator=evaluator)
-        result = _search(search, more_points=None, failed=exc.failed)
+        result = _search(search, more_points=None, failed=exc.failed, prefix=exc.prefix)
     result.planning_time_s = clock() - started
     result.rollouts = spent + evaluator.rollouts
     result.task = task
@@ -134,23 +136,31 @@ class _Search:
 class MoreParticlesError(Exception):
     """The first plan of a search on the default axis belief failed verification on offsets
     between its particles: plan again on ``points`` a bounded axis (``raised_points``),
-    keeping ``failed`` (the plan, its verification) as the best unverified plan so far."""
+    keeping ``failed`` (the plan, its verification) as the best unverified plan so far, and
+    ``prefix`` (its steps and the contacts they made), where the new search may resume."""
 
     def __init__(
-        self, points: int, reason: str, failed: tuple[list[PlannedMotion], Verification]
+        self,
+        points: int,
+        reason: str,
+        failed: tuple[list[PlannedMotion], Verification],
+        prefix: "tuple[list[Step], list[Reached]]",
     ) -> None:
         super().__init__(reason)
-        self.points, self.reason, self.failed = points, reason, failed
+        self.points, self.reason, self.failed, self.prefix = points, reason, failed, prefix
 
 
 def _search(
     inputs: _Search,
     more_points: int | None,
     failed: tuple[list[PlannedMotion], Verification] | None = None,
+    prefix: "tuple[list[Step], list[Reached]] | None" = None,
 ) -> PlanResult:
     """Search ``inputs.task`` to its deadline. With ``more_points``, a first plan that fails
     verification on offsets inside the bounds raises MoreParticlesError; ``failed``: a plan
-    from an earlier search on fewer particles, returned if no better one is found."""
+    from an earlier search on fewer particles, returned if no better one is found;
+    ``prefix``: that plan's steps and contacts, where the first attempt resumes
+    (`restart_at`)."""
     task, clock, started, deadline = inputs.task, time.perf_counter, inputs.started, inputs.deadline
     since = clock()  # this search's start (a restart's is later than the plan's)
     progress = inputs.progress
@@ -170,7 +180,9 @@ def _search(
     try:
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
-        _attempts(task, graph, b0, search, rng, result, panda, verifying, since, more_points)
+        _attempts(
+            task, graph, b0, search, rng, result, panda, verifying, since, more_points, prefix
+        )
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
         result.reason = (
@@ -312,6 +324,7 @@ def _attempts(
     verifying: tuple[Particle, ...],
     started: float,
     more_points: int | None = None,
+    prefix: "tuple[list[Step], list[Reached]] | None" = None,
 ) -> None:
     params = task.spec.planner
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
@@ -322,8 +335,16 @@ def _attempts(
         if more_rounds and not graph.has_schedule():
             graph.restore()
             result.rounds += 1
-        graph.reweight(_positions(belief))
         reached = [Reached(belief, mode, 0)]  # the contacts made so far in this attempt
+        if attempt == 0 and prefix is not None:  # a restart: go on where the plan before did
+            made = restart_at(search, graph, b0, *prefix)
+            if made is not None:
+                reached = made
+                belief, mode, steps = reached[-1].belief, reached[-1].mode, prefix[0]
+                steps = steps[: reached[-1].steps]
+                result.resumed = mode, len(steps)
+                search.recorder.resumed(mode, len(steps))
+        graph.reweight(_positions(belief))
         added: list[Particle] = []  # check particles added in this attempt (verification)
         while True:
             evaluator = search.evaluator
@@ -360,7 +381,9 @@ def _attempts(
                 first = result.verification is not None and result.verification.plans == 1
                 if lost and more_points is not None and first and between(task, lost):
                     assert result.unverified is not None  # _verify keeps the plan it failed
-                    raise MoreParticlesError(more_points, result.reason, result.unverified)
+                    raise MoreParticlesError(
+                        more_points, result.reason, result.unverified, (steps, reached)
+                    )
                 if lost:
                     b0 = with_more_checks(task, b0, lost[:ADD_CHECKS])
                     added += lost[:ADD_CHECKS]
@@ -399,6 +422,50 @@ class Reached:
     steps: int
 
 
+def _replayed(
+    search: ContactSearch, belief: Belief, steps: list[Step], reached: list[Reached]
+) -> Iterator[tuple[int, Belief, bool]]:
+    """``steps`` replayed on ``belief``: at each contact ``k`` of ``reached`` before the
+    goal, its belief there and whether every particle of it is in that contact or one after."""
+    done = 0
+    for k in range(1, len(reached) - 1):
+        for step in steps[done : reached[k].steps]:
+            belief = belief.after(search.evaluator.simulate(belief.under(step.motion)))
+        done = reached[k].steps
+        yield k, belief, belief.count(frozenset(r.mode for r in reached[k:])) == len(belief)
+
+
+def restart_at(
+    search: ContactSearch,
+    graph: ModeGraph,
+    b0: Belief,
+    steps: list[Step],
+    reached: list[Reached],
+) -> list[Reached] | None:
+    """Where a search restarted on more particles goes on: the plan of the search before
+    (``steps``, making the contacts ``reached``) replayed from ``b0`` on the new particles and
+    their check particles, up to the last of its contacts they all made (with a schedule on
+    from there): those contacts need no new search. The contacts they made, from the start
+    (``Reached``, on the new particles); None when they made none."""
+    n, check = len(b0), b0.check
+    whole = b0
+    if check is not None:
+        whole = Belief(
+            (*b0.particles, *check.particles),
+            (*b0.states, *check.states),
+            (*b0.contacts, *check.contacts),
+        )
+    made, last = [Reached(b0, FREE, 0)], 0
+    for k, replayed, all_in in _replayed(search, whole, steps, reached):
+        if not all_in:
+            continue
+        belief = replayed[:n] if check is None else replayed[:n].with_check(replayed[n:])
+        made.append(Reached(belief, reached[k].mode, reached[k].steps))
+        if graph.has_schedule(reached[k].mode):
+            last = len(made) - 1
+    return made[: last + 1] if last > 0 else None
+
+
 def resume_at(
     task: Task,
     search: ContactSearch,
@@ -411,15 +478,9 @@ def resume_at(
     particles made too, or one after it, replaying its motions on them; and the check
     particles there, with the lost ones (last, replacing any there already: those added
     earlier in the attempt). None when there is no such contact."""
-    extra = start_belief(task, lost)
     found: tuple[int, Belief] | None = None  # the last contact they made, their belief there
-    done = 0
-    for k in range(1, len(reached) - 1):
-        for step in steps[done : reached[k].steps]:
-            extra = extra.after(search.evaluator.simulate(extra.under(step.motion)))
-        done = reached[k].steps
-        later = frozenset(r.mode for r in reached[k:])
-        if extra.count(later) == len(extra):
+    for k, extra, all_in in _replayed(search, start_belief(task, lost), steps, reached):
+        if all_in:
             found = k, extra
     if found is None:
         return None

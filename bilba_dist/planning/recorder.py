@@ -32,6 +32,8 @@ class Recorder(Protocol):
 
     def restarted(self, points: int, particles: int, reason: str) -> None: ...
 
+    def resumed(self, contact: ContactPair, motions: int) -> None: ...
+
 
 class NullRecorder:
     """Records nothing (``--no-log``)."""
@@ -52,4 +54,7 @@ class NullRecorder:
         pass
 
     def restarted(self, points: int, particles: int, reason: str) -> None:
+        pass
+
+    def resumed(self, contact: ContactPair, motions: int) -> None:
         pass

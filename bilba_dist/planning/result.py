@@ -78,6 +78,10 @@ class PlanResult:
     #: first plan failed verification between them (planning/bilba.py ``plan``); None from
     #: a planner that does not say.
     task: "Task | None" = None
+    #: After such a restart: the contact of the first plan, and its motions that made it,
+    #: that the new particles made too, where the restarted search went on (None: from the
+    #: start).
+    resumed: tuple[ContactPair, int] | None = None
 
     def outcome(self) -> dict[str, Any]:
         """Success, why not, time, rollouts and whether the plan passed verification (None:

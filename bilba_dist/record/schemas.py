@@ -120,6 +120,10 @@ TOPICS: dict[str, dict[str, Any]] = {
         },
         "bilba.Restart",
     ),
+    "/resume": _object(
+        {"contact": {"type": "string"}, "motions": {"type": "integer"}},
+        "bilba.Resume",
+    ),
     "/plan": {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "bilba.Plan",

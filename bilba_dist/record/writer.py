@@ -139,7 +139,7 @@ class LogWriter:
         accepted: bool,
     ) -> None:
         if not self._start_drawn:
-            self.draw(before)  # the start belief (again after a restart on more particles)
+            self.draw(before)  # the start belief (after a restart: where the new search starts)
             self._start_drawn = True
         self.write(
             "/transition",
@@ -199,6 +199,12 @@ class LogWriter:
         all): its start belief is drawn again at its next transition."""
         self.write("/restart", {"points": points, "particles": particles, "reason": reason})
         self._start_drawn = False
+        self.commit()
+
+    def resumed(self, contact: ContactPair, motions: int) -> None:
+        """The restarted search goes on from ``contact``, which the first ``motions`` motions
+        of the plan before it made for the new particles too."""
+        self.write("/resume", {"contact": str(contact), "motions": motions})
         self.commit()
 
     def finish(self, plan_text: str, outcome: dict[str, Any]) -> None:
