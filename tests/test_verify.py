@@ -402,23 +402,37 @@ def test_a_first_plan_that_fails_verification_between_the_particles_restarts_on_
     starts again on 5 within the same deadline, counting both searches' rollouts and plans;
     with none passing by verify_effort, the best comes back marked failed, for the task on 5.
     The same search on a task file's own `points: 3` is planned on 3 to the end."""
+    import time
+
     import yaml
 
+    from bilba_dist.planning.recorder import NullRecorder
     from bilba_dist.task.loader import builtin_tasks
 
-    task = with_planner(load_task("peg-in-hole"), verify_effort=2.0)
+    class Clocked(NullRecorder):
+        def restarted(self, points: int, particles: int, reason: str) -> None:
+            self.at = time.perf_counter()
+
+    task = with_planner(load_task("peg-in-hole"), verify_effort=1.0)  # no time to repair
     worker = RolloutWorker(task)
     _friction_lost(monkeypatch, task)
-    result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=120)
+    recorder, began = Clocked(), time.perf_counter()
+    result = plan(task, worker, "bilba-fixed", seed=0, timeout_s=120, recorder=recorder)
+    # verify_effort counts from the start of planning, the first search's time included
+    # (the restarted search resumes: timed from its own start its first plan comes so soon
+    # that the limit would cut its repairs short)
+    assert result.first_plan_s > recorder.at - began
+    assert result.planning_time_s < result.first_plan_s + 10
+    assert result.resumed is not None
     assert result.task is not None and len(initial_belief(result.task)) == 5
     assert result.task.spec.belief.points == 5 and result.task.spec.planner == task.spec.planner
     check = result.verification
     assert result.success and check is not None and not check.passed and check.plans >= 2
-    assert result.reason.startswith("no plan passed verification within 2x the time")
+    assert result.reason.startswith("no plan passed verification within 1x the time")
     assert "belief: {points: 7}" in result.reason  # the hint reads the task planned on
 
     data = yaml.safe_load(builtin_tasks()["peg-in-hole"].read_text())
-    own = with_planner(load_task({**data, "belief": {"points": 3}}), verify_effort=2.0)
+    own = with_planner(load_task({**data, "belief": {"points": 3}}), verify_effort=1.0)
     kept = plan(own, worker, "bilba-fixed", seed=0, timeout_s=120)
     assert kept.task is own and kept.verification is not None and not kept.verification.passed
     assert "belief: {points: 5}" in kept.reason

@@ -126,7 +126,11 @@ class _Search:
     evaluator: Evaluator
     variant: Variant
     seed: int
-    started: float  # when the plan began (a timeout's reason counts from there)
+    #: When the plan began: a timeout's reason, the first plan's time and verify_effort's
+    #: limit count from there, a restart's search included (it goes on from the first
+    #: search's contacts: timed from its own start, its first plan came so soon that the
+    #: limit cut repairs short, 3 of 26 puzzle restarts)
+    started: float
     deadline: float
     progress: Progress
     recorder: Recorder | None
@@ -162,7 +166,6 @@ def _search(
     ``prefix``: that plan's steps and contacts, where the first attempt resumes
     (`restart_at`)."""
     task, clock, started, deadline = inputs.task, time.perf_counter, inputs.started, inputs.deadline
-    since = clock()  # this search's start (a restart's is later than the plan's)
     progress = inputs.progress
     rng = np.random.default_rng(inputs.seed)
     params = task.spec.planner
@@ -181,7 +184,7 @@ def _search(
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
         _attempts(
-            task, graph, b0, search, rng, result, panda, verifying, since, more_points, prefix
+            task, graph, b0, search, rng, result, panda, verifying, started, more_points, prefix
         )
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""

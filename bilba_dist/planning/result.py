@@ -67,8 +67,8 @@ class PlanResult:
     #: The returned plan's verification (None: off, or no plan); when the search ran out of
     #: time with no plan that passed, the plan that held best, ``passed`` false.
     verification: Verification | None = None
-    #: Seconds to the first plan found (before its verification; 0: none yet), from the
-    #: start of the search that returned it (after a restart on more particles, the restart).
+    #: Seconds to the first plan found by the search that returned it (before its
+    #: verification; 0: none yet), from the start of planning (a restart's search included).
     first_plan_s: float = 0.0
     #: The best plan that failed verification so far, for a search that runs out of time.
     unverified: tuple[list[PlannedMotion], Verification] | None = None
