@@ -55,6 +55,15 @@ class Belief:
         """The belief of a slice of the particles."""
         return Belief(self.particles[part], self.states[part], self.contacts[part])
 
+    def __add__(self, other: "Belief") -> "Belief":
+        """The belief of both's particles, these first (no check particles: ``[:n]`` splits
+        them again)."""
+        return Belief(
+            (*self.particles, *other.particles),
+            (*self.states, *other.states),
+            (*self.contacts, *other.contacts),
+        )
+
     def X_OM(self, i: int) -> pin.SE3:
         """Particle ``i``'s manipuland in its environment frame."""
         return self.particles[i].X_WO.inverse() * self.states[i].X_WM

@@ -343,8 +343,8 @@ def _attempts(
             made = restart_at(search, graph, b0, *prefix)
             if made is not None:
                 reached = made
-                belief, mode, steps = reached[-1].belief, reached[-1].mode, prefix[0]
-                steps = steps[: reached[-1].steps]
+                belief, mode = reached[-1].belief, reached[-1].mode
+                steps = prefix[0][: reached[-1].steps]
                 result.resumed = mode, len(steps)
                 search.recorder.resumed(mode, len(steps))
         graph.reweight(_positions(belief))
@@ -451,13 +451,7 @@ def restart_at(
     from there): those contacts need no new search. The contacts they made, from the start
     (``Reached``, on the new particles); None when they made none."""
     n, check = len(b0), b0.check
-    whole = b0
-    if check is not None:
-        whole = Belief(
-            (*b0.particles, *check.particles),
-            (*b0.states, *check.states),
-            (*b0.contacts, *check.contacts),
-        )
+    whole = b0 if check is None else b0 + check
     made, last = [Reached(b0, FREE, 0)], 0
     for k, replayed, all_in in _replayed(search, whole, steps, reached):
         if not all_in:
