@@ -44,6 +44,19 @@ def test_env_offset_moves_the_environment():
     assert minus.X_WO.translation[1] == pytest.approx(-0.01)
 
 
+def test_a_belief_splits_and_joins_by_particle(peg):
+    from bilba_dist.belief.start import start_belief
+
+    belief = start_belief(peg, initial_belief(peg))
+    nominal, plus, minus = belief.particles
+    rest = belief.without([plus])
+    assert rest.particles == (nominal, minus)
+    assert rest.states == (belief.states[0], belief.states[2])
+    assert (rest + belief[1:2]).particles == (nominal, minus, plus)
+    assert belief.without([]).particles == belief.particles
+    assert len(belief.without(belief.particles)) == 0
+
+
 def _with_belief(task, belief):
     spec = task.spec.model_validate({**task.spec.model_dump(), "belief": belief})
     return build_task(spec, task.source)

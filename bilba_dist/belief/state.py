@@ -55,6 +55,15 @@ class Belief:
         """The belief of a slice of the particles."""
         return Belief(self.particles[part], self.states[part], self.contacts[part])
 
+    def without(self, particles: Sequence[Particle]) -> "Belief":
+        """The belief of the other particles, in their order (no check particles)."""
+        kept = [i for i, p in enumerate(self.particles) if p not in particles]
+        return Belief(
+            tuple(self.particles[i] for i in kept),
+            tuple(self.states[i] for i in kept),
+            tuple(self.contacts[i] for i in kept),
+        )
+
     def __add__(self, other: "Belief") -> "Belief":
         """The belief of both's particles, these first (no check particles: ``[:n]`` splits
         them again)."""

@@ -485,12 +485,7 @@ def resume_at(
     check = reached[k].belief.check
     if check is None:
         return k, extra
-    kept = [i for i, p in enumerate(check.particles) if p not in lost]
-    return k, Belief(
-        (*(check.particles[i] for i in kept), *extra.particles),
-        (*(check.states[i] for i in kept), *extra.states),
-        (*(check.contacts[i] for i in kept), *extra.contacts),
-    )
+    return k, check.without(lost) + extra
 
 
 def _verify(
