@@ -369,7 +369,7 @@ def test_a_task_that_leaves_its_points_to_the_default_may_restart_on_two_more(tm
     assert verify.raised_points(load_task("peg-in-hole", ["grasp.x=1cm", "env.y=1cm"])) == 5
     spec = pickle.loads(pickle.dumps(prism.spec))
     assert verify.raised_points(replace(prism, spec=spec)) == 5
-    assert verify.raised_points(load_task("puzzle")) is None  # its file says points: 5
+    assert verify.raised_points(load_task("puzzle")) == 5  # no belief section: the default
     data = yaml.safe_load(prism_file(tmp_path, 6, 0.002).read_text())
     for belief in ({"generator": "axis", "points": 3}, {"generator": "extremal+random"}):
         assert verify.raised_points(load_task({**data, "belief": belief})) is None
