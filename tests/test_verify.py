@@ -264,6 +264,27 @@ def test_a_plan_that_lost_a_particle_resumes_from_the_last_contact_that_particle
     assert again.particles == joined.particles
 
 
+def test_verification_replays_a_share_of_the_plans_rollouts_before_a_restart_too(
+    fixed_peg_plan,
+):
+    """A fifth of the rollouts spent on the plan pays for its replay: a search that has
+    spent none checks one offset (at each friction), and a restarted one, which resumes
+    from the contacts of the search before it and spends few of its own before its first
+    plan, counts that search's rollouts as well (counted alone, 3 of 11 restarted puzzle
+    plans were checked on one offset)."""
+    task, worker, result = fixed_peg_plan
+    particles = verify_particles(task, 0.5)
+    assert len(particles) == 42  # 14 offsets at 3 frictions
+    checked = []
+    for spent in (0, 10_000):
+        search = bilba.contact_search(task, Evaluator(worker), "bilba-fixed", float("inf"))
+        outcome = bilba.PlanResult(False, "", [], "bilba-fixed", 0)
+        bilba._verify(task, result.motions, particles, search, outcome, spent)
+        assert outcome.verification is not None and outcome.verification.passed
+        checked.append(outcome.verification.particles)
+    assert checked == [3, 42]
+
+
 def test_a_restarted_search_goes_on_from_the_contacts_its_new_particles_made(fixed_peg_plan):
     """A restart on 5 particles replays the plan on 3 that failed verification from the new
     start belief, check particles included, and goes on from the last of its contacts

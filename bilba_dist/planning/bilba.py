@@ -110,7 +110,7 @@ def plan(
         # a search of its own (its verification's share and effort limit count from here),
         # to the same deadline
         evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
-        search = replace(search, task=task, evaluator=evaluator)
+        search = replace(search, task=task, evaluator=evaluator, spent=spent)
         result = _search(search, more_points=None, failed=exc.failed, prefix=exc.prefix)
     result.planning_time_s = clock() - started
     result.rollouts = spent + evaluator.rollouts
@@ -135,6 +135,10 @@ class _Search:
     progress: Progress
     recorder: Recorder | None
     validate_on: RolloutBackend | None
+    #: Rollouts of the search before this one (a restart): verification's share counts them,
+    #: as the plan it resumes from is theirs (counted from the restart, a resumed search's
+    #: first plan was checked on one offset, 3 of 12 puzzle restarts)
+    spent: int = 0
 
 
 class MoreParticlesError(Exception):
@@ -184,7 +188,18 @@ def _search(
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
         _attempts(
-            task, graph, b0, search, rng, result, panda, verifying, started, more_points, prefix
+            task,
+            graph,
+            b0,
+            search,
+            rng,
+            result,
+            panda,
+            verifying,
+            started,
+            more_points,
+            prefix,
+            inputs.spent,
         )
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
@@ -328,6 +343,7 @@ def _attempts(
     started: float,
     more_points: int | None = None,
     prefix: "tuple[list[Step], list[Reached]] | None" = None,
+    spent: int = 0,
 ) -> None:
     params = task.spec.planner
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
@@ -380,7 +396,7 @@ def _attempts(
                     result.first_plan_s = search.clock() - started
                     limit = started + params.verify_effort * result.first_plan_s
                     search.deadline = min(search.deadline, limit)
-                lost = _verify(task, motions, verifying, search, result) if verifying else []
+                lost = _verify(task, motions, verifying, search, result, spent) if verifying else []
                 first = result.verification is not None and result.verification.plans == 1
                 if lost and more_points is not None and first and between(task, lost):
                     assert result.unverified is not None  # _verify keeps the plan it failed
@@ -494,12 +510,14 @@ def _verify(
     particles: tuple[Particle, ...],
     search: ContactSearch,
     result: PlanResult,
+    spent: int = 0,
 ) -> list[Particle]:
     """Verify a plan (planning/verify.py) on as many of the particles as ``verify_share``
-    of the search's rollouts allows; the particles it lost when it failed, else none."""
+    of the plan's rollouts allows (the search's, and ``spent`` by one before it); the
+    particles it lost when it failed, else none."""
     params = task.spec.planner
     per_offset = 3 if robust_friction(task) > 0 else 1  # verify_particles: one a friction
-    budget = params.verify_share * search.evaluator.rollouts
+    budget = params.verify_share * (spent + search.evaluator.rollouts)
     chosen = within_budget(particles, per_offset, len(motions), budget)
     verification, failed = verify(task, motions, chosen, search.evaluator)
     plans = result.verification.plans + 1 if result.verification else 1
