@@ -288,12 +288,14 @@ def test_a_batch_submitted_with_ray_job_submit_completes(tmp_path):
     every Ray process of this user, so this test must not share the machine with another Ray."""
     env = {**os.environ, "PATH": f"{BIN}{os.pathsep}{os.environ['PATH']}"}
     port, dashboard = _free_port(), _free_port()
-    subprocess.run(
+    head = subprocess.run(
         [BIN / "ray", "start", "--head", "--num-cpus=2", f"--port={port}",
          "--dashboard-host=127.0.0.1", f"--dashboard-port={dashboard}",
          "--include-dashboard=true", "--disable-usage-stats"],
-        env=env, check=True, capture_output=True, timeout=120,
+        env=env, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
+    # (it failed once in CI, exit 1, its output unseen: say why next time)
+    assert head.returncode == 0, head.stdout[-2000:] + head.stderr[-2000:]
     out = tmp_path / "out"
     try:
         submitted = subprocess.run(

@@ -107,8 +107,8 @@ def plan(
         task, spent = with_points(task, exc.points), evaluator.rollouts
         particles = particle_count(task.spec.belief, len(task.spec.bounds))
         (recorder or NullRecorder()).restarted(exc.points, particles, exc.reason)
-        # a search of its own (its verification's share and effort limit count from here),
-        # to the same deadline
+        # a search of its own rollout counter, to the same deadline (its verification's share
+        # and effort limit count the first search's too: `_Search`)
         evaluator = Evaluator(backend, on_batch=lambda n: _count(progress, n))
         search = replace(search, task=task, evaluator=evaluator, spent=spent)
         result = _search(search, more_points=None, failed=exc.failed, prefix=exc.prefix)
@@ -137,7 +137,7 @@ class _Search:
     validate_on: RolloutBackend | None
     #: Rollouts of the search before this one (a restart): verification's share counts them,
     #: as the plan it resumes from is theirs (counted from the restart, a resumed search's
-    #: first plan was checked on one offset, 3 of 12 puzzle restarts)
+    #: first plan was checked on one offset, 3 of 11 puzzle restarts)
     spent: int = 0
 
 
