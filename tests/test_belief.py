@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from bilba_dist.belief.particles import initial_belief, random_offsets
+from bilba_dist.belief.start import start_belief
 from bilba_dist.task.loader import build_task, load_task
 
 
@@ -45,8 +46,6 @@ def test_env_offset_moves_the_environment():
 
 
 def test_a_belief_splits_and_joins_by_particle(peg):
-    from bilba_dist.belief.start import start_belief
-
     belief = start_belief(peg, initial_belief(peg))
     nominal, plus, minus = belief.particles
     rest = belief.without([plus])

@@ -188,18 +188,7 @@ def _search(
         graph, _ = belief_graph(task, particles, task.X_WG0, search.cache)
         verifying = verify_particles(task, robust_friction(task))
         _attempts(
-            task,
-            graph,
-            b0,
-            search,
-            rng,
-            result,
-            panda,
-            verifying,
-            started,
-            more_points,
-            prefix,
-            inputs.spent,
+            task, graph, b0, search, rng, result, panda, verifying, inputs, more_points, prefix
         )
     except NoScheduleError as exc:
         rounds = f" in {result.rounds} rounds" if result.rounds > 1 else ""
@@ -340,12 +329,11 @@ def _attempts(
     result: PlanResult,
     panda: PandaModel,
     verifying: tuple[Particle, ...],
-    started: float,
+    inputs: _Search,
     more_points: int | None = None,
     prefix: "tuple[list[Step], list[Reached]] | None" = None,
-    spent: int = 0,
 ) -> None:
-    params = task.spec.planner
+    params, started = task.spec.planner, inputs.started
     attempts = range(params.n_attempts) if params.n_attempts else itertools.count()
     for attempt in attempts:
         result.attempts = attempt + 1
@@ -396,7 +384,11 @@ def _attempts(
                     result.first_plan_s = search.clock() - started
                     limit = started + params.verify_effort * result.first_plan_s
                     search.deadline = min(search.deadline, limit)
-                lost = _verify(task, motions, verifying, search, result, spent) if verifying else []
+                lost = (
+                    _verify(task, motions, verifying, search, result, inputs.spent)
+                    if verifying
+                    else []
+                )
                 first = result.verification is not None and result.verification.plans == 1
                 if lost and more_points is not None and first and between(task, lost):
                     assert result.unverified is not None  # _verify keeps the plan it failed
