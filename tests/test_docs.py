@@ -5,6 +5,8 @@ import re
 import subprocess
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [
     ROOT / "README.md",
@@ -32,11 +34,15 @@ def test_readme_is_for_users_and_short():
     readme = (ROOT / "README.md").read_text()
     assert len(readme.split()) <= 3000
     assert len(readme.splitlines()) <= 300
-    assert [line for line in prose_lines(readme) if len(line) > 100] == []
     assert [row for row in readme.splitlines() if row.startswith("|") and len(row) > 240] == []
     first_commands = [line.strip() for line in readme.splitlines() if line.startswith("    ")][:2]
     assert first_commands[0].endswith(".venv/bin/pytest")
     assert first_commands[1].endswith("bilba plan peg-in-hole")
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda page: str(page.relative_to(ROOT)))
+def test_prose_is_wrapped(page):
+    assert [line for line in prose_lines(page.read_text()) if len(line) > 100] == []
 
 
 def test_every_relative_link_resolves():
