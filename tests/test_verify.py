@@ -13,6 +13,7 @@ from bilba_dist.geometry.contact import FREE
 from bilba_dist.planning import bilba, verify
 from bilba_dist.planning.evaluate import Evaluator
 from bilba_dist.planning.make_contact import Step
+from bilba_dist.planning.result import Verification
 from bilba_dist.planning.verify import VERIFY_SEED, verify_particles, within_budget
 from bilba_dist.plans.file import read_plan
 from bilba_dist.plans.replay import run_motions
@@ -175,7 +176,6 @@ def test_a_plan_that_failed_verification_says_what_it_lost_and_how_to_plan_on_it
 ):
     import yaml
 
-    from bilba_dist.planning.result import Verification
     from bilba_dist.planning.verify import more_particles_hint
     from bilba_dist.task.loader import builtin_tasks
 
@@ -184,6 +184,19 @@ def test_a_plan_that_failed_verification_says_what_it_lost_and_how_to_plan_on_it
     failed = Verification(42, {"1": 0.9}, passed=False, lost=lost)
     assert says in more_particles_hint(task, failed)
     assert more_particles_hint(task, Verification(42, {"1": 1.0})) == ""
+
+
+@pytest.mark.parametrize(
+    ("particles", "held", "says"),
+    [
+        (3, {"0.5": 1.0, "1": 1.0, "1.5": 1.0}, "1 offset × 3 frictions (3 particles), in"),
+        (42, {"0.5": 1.0, "1": 0.93, "1.5": 1.0}, "14 offsets × 3 frictions (42 particles), in"),
+        (14, {"1": 1.0}, "14 offsets, in the goal 1.00 at 1 μ"),
+        (14, {"all": 0.5}, "14 particles, in the goal 0.50"),
+    ],
+)
+def test_verification_says_how_many_offsets_at_how_many_frictions(particles, held, says):
+    assert Verification(particles, held).text().startswith(says)
 
 
 def test_a_search_out_of_time_before_its_effort_limit_says_the_timeout_ended_it(monkeypatch):

@@ -42,10 +42,21 @@ class Verification:
     lost: list[dict[str, float]] = field(default_factory=list)
 
     def text(self) -> str:
+        """E.g. "1 offset × 3 frictions (3 particles), in the goal 1.00 at 0.5 μ, …": how
+        many offsets a plan was replayed on (a quick plan's few, `verify_share`) is what a
+        reader weighs, not the particles."""
         held = ", ".join(
             f"{v:.2f}" + ("" if k == "all" else f" at {k} μ") for k, v in self.held.items()
         )
-        return f"{self.particles} particles, in the goal {held}"
+        frictions = 0 if "all" in self.held else len(self.held)
+        if frictions == 0:
+            on = f"{self.particles} particles"
+        else:
+            offsets = self.particles // frictions
+            on = f"{offsets} offset{'' if offsets == 1 else 's'}"
+            if frictions > 1:
+                on += f" × {frictions} frictions ({self.particles} particles)"
+        return f"{on}, in the goal {held}"
 
 
 @dataclass
