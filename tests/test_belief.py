@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from bilba_dist.belief.particles import initial_belief, random_offsets
+from bilba_dist.belief.particles import initial_belief, random_offsets, stratified_offsets
 from bilba_dist.belief.start import start_belief
 from bilba_dist.task.loader import build_task, load_task
 
@@ -89,3 +89,32 @@ def test_explicit_particles(peg):
     }
     _, second = initial_belief(_with_belief(peg, belief))
     assert second.offsets == pytest.approx({"grasp.x": 0.005, "env.yaw": np.deg2rad(1)})
+
+
+def test_stratified_offsets_put_one_in_each_slice_of_the_bound():
+    offsets = [o["grasp.x"] for o in stratified_offsets({"grasp.x": 0.01}, 14, seed=3)]
+    slices = np.floor((np.array(offsets) + 0.01) / 0.02 * 14).astype(int)
+    assert sorted(slices) == list(range(14))
+    assert min(slices[:7]) < 4 and max(slices[:7]) > 9  # a prefix spreads over the bound too
+    assert offsets == [o["grasp.x"] for o in stratified_offsets({"grasp.x": 0.01}, 14, seed=3)]
+
+
+def _covering_radius(offsets: list[dict[str, float]], bounds: dict[str, float]) -> float:
+    """How far (against the bounds) the worst-covered point of the ellipsoid is from an offset."""
+    probe = np.array([[p[k] / bounds[k] for k in bounds] for p in random_offsets(bounds, 4000, 11)])
+    drawn = np.array([[o[k] / bounds[k] for k in bounds] for o in offsets])
+    return float(np.linalg.norm(probe[:, None] - drawn[None], axis=2).min(axis=1).max())
+
+
+def test_stratified_offsets_of_several_axes_cover_the_ellipsoid_evenly():
+    bounds = {"grasp.x": 0.01, "env.y": 0.02, "grasp.pitch": 0.035}
+    offsets = stratified_offsets(bounds, 14, seed=3)
+    assert offsets == stratified_offsets(bounds, 14, seed=3)
+    unit = np.array([[o[k] / bounds[k] for k in bounds] for o in offsets])
+    assert len(unit) == 14 and np.all(np.linalg.norm(unit, axis=1) <= 1.0)
+    # the worst-covered point is nearer an offset than for any of 20 random draws of 14
+    randoms = [_covering_radius(random_offsets(bounds, 14, s), bounds) for s in range(20)]
+    assert _covering_radius(offsets, bounds) < min(randoms)
+    # farthest-first: the first 4 are as spread as any 4 of a random draw's
+    first = np.linalg.norm(unit[:4, None] - unit[None, :4], axis=2)
+    assert first[np.triu_indices(4, 1)].min() > 0.8

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pinocchio as pin
+from sklearn.cluster import KMeans
 
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.loader import Task
@@ -97,6 +98,32 @@ def inner_offsets(bounds: Mapping[str, float], points: int) -> list[dict[str, fl
         for key, n in bounds.items()
         for sign in (1.0, -1.0)
     ]
+
+
+def stratified_offsets(bounds: Mapping[str, float], k: int, seed: int) -> list[dict[str, float]]:
+    """``k`` offsets that cover the ellipsoid whose semi-axes are the bounds evenly, one in
+    each cell of an even partition of it: with one bounded axis, one offset uniform in each of
+    ``k`` equal slices of [-bound, +bound], in a shuffled order; with several, the centres of
+    ``k`` k-means cells of a uniform draw (each axis measured against its bound), ordered
+    farthest-first from a random one. Either way a prefix of the list spreads too."""
+    keys = list(bounds)
+    if not keys or k == 0:
+        return []
+    rng = np.random.default_rng(seed)
+    if len(keys) == 1:
+        (key,) = keys
+        u = (rng.permutation(k) + rng.uniform(size=k)) / k
+        return [{key: float((2 * x - 1) * bounds[key])} for x in u]
+    scale = np.array([bounds[key] for key in keys])
+    pool = np.array([[o[key] for key in keys] for o in random_offsets(bounds, 64 * k, seed)])
+    cells = KMeans(n_clusters=k, n_init=1, random_state=seed).fit(pool / scale)
+    centres = cells.cluster_centers_
+    order = [int(rng.integers(k))]
+    gap = np.linalg.norm(centres - centres[order[0]], axis=1)
+    while len(order) < k:
+        order.append(int(np.argmax(gap)))
+        gap = np.minimum(gap, np.linalg.norm(centres - centres[order[-1]], axis=1))
+    return [dict(zip(keys, (centres[i] * scale).tolist(), strict=True)) for i in order]
 
 
 def random_offsets(bounds: Mapping[str, float], k: int, seed: int) -> list[dict[str, float]]:

@@ -3,7 +3,8 @@
 Robust acceptance checks each motion on the planning particles' twins at other frictions,
 but not at offsets between the planning particles, where a part on sub-millimetre gaps may
 drop either way (docs/planner.md, Verification). So a plan found is first replayed on
-particles it was not planned on: offsets drawn inside the bounds (a fixed draw), each at
+particles it was not planned on: offsets spread evenly inside the bounds (a fixed,
+stratified draw: one in each cell of an even partition of the bounds), each at
 friction x(1 - f), x1 and x(1 + f). A plan that brings fewer than ``verify_min`` of them to
 the goal at some friction is not returned: up to ``ADD_CHECKS`` of the particles it failed
 become check particles, and the search goes on from the last contact of the plan that
@@ -13,7 +14,7 @@ fewer particles (at least one offset) and a hard one all of them."""
 
 from dataclasses import replace
 
-from bilba_dist.belief.particles import Particle, make_particle, random_offsets
+from bilba_dist.belief.particles import Particle, make_particle, stratified_offsets
 from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.planning.result import PlannedMotion, Verification
@@ -37,13 +38,16 @@ ADD_CHECKS = 2
 
 
 def verify_particles(task: Task, friction_margin: float) -> tuple[Particle, ...]:
-    """``planner.verify_particles`` offsets drawn inside the bounds, each at friction
+    """``planner.verify_particles`` offsets spread evenly inside the bounds (a stratified
+    draw, belief/particles.py ``stratified_offsets``), each at friction
     x(1 - f), x1 and x(1 + f) (x1 alone when f, robust acceptance's margin, is 0); in the
     order of the offsets, so a prefix is the first offsets at every friction. Simulated at
     the fine step where the task plans at a coarser one (task/timestep.py): the ones a plan
     loses become check particles, and stay at that step."""
     f = friction_margin
-    drawn = random_offsets(task.spec.bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED)
+    drawn = stratified_offsets(
+        task.spec.bounds, task.spec.planner.verify_particles, seed=VERIFY_SEED
+    )
     step = verify_timestep(task.timestep_s)
     return tuple(
         replace(

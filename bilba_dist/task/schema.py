@@ -332,8 +332,8 @@ class PlannerParams(Strict):
     # each at friction x(1 - f), x1 and x(1 + f) (0: the planning particles' twins only).
     check_random: int = Field(default=0, ge=0, le=64)
     # Verify a plan before returning it (ours; the authors: 0, off): replay it on this many
-    # offsets drawn inside the bounds (a fixed draw), each at friction x(1 - f), x1 and
-    # x(1 + f); one that brings fewer than verify_min of them to the goal at some friction is
+    # offsets spread evenly inside the bounds (a fixed, stratified draw), each at friction
+    # x(1 - f), x1 and x(1 + f); one that brings fewer than verify_min of them to the goal at some friction is
     # not returned, two of the particles it lost become check particles, and the search
     # goes on from the last contact of that plan they made too (else from the start). The
     # replay spends at most verify_share of the search's rollouts so far
