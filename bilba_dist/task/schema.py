@@ -337,8 +337,8 @@ class PlannerParams(Strict):
     # at some friction is not returned, two of the particles it lost become check particles,
     # and the search goes on from the last contact of that plan they made too (else from the
     # start). The replay spends at most verify_share of the search's rollouts so far (at
-    # least one offset). Every verified plan of the puzzle's hard cells then held >= 0.929 of
-    # 14 held-out particles at 0.5, 1 and 1.5 μ (docs/planner.md, Verification).
+    # least one offset). Every verified plan of the puzzle's hard cells (seeds 5-7) then held
+    # >= 0.929 of 14 held-out particles at 0.5, 1 and 1.5 μ (docs/planner.md, Verification).
     verify_particles: int = Field(default=14, ge=0, le=256)
     verify_min: float = Field(default=1.0, ge=0, le=1)
     verify_share: float = Field(default=0.2, gt=0, le=100)
