@@ -115,6 +115,6 @@ def test_stratified_offsets_of_several_axes_cover_the_ellipsoid_evenly():
     # the worst-covered point is nearer an offset than for any of 20 random draws of 14
     randoms = [_covering_radius(random_offsets(bounds, 14, s), bounds) for s in range(20)]
     assert _covering_radius(offsets, bounds) < min(randoms)
-    # farthest-first: the first 4 are as spread as any 4 of a random draw's
+    # farthest-first: the first 4 lie far apart (the random draw's first 4 of seed 3: 0.47)
     first = np.linalg.norm(unit[:4, None] - unit[None, :4], axis=2)
     assert first[np.triu_indices(4, 1)].min() > 0.8
