@@ -83,6 +83,58 @@ def test_name_map_names_faces_by_normal():
     assert np.allclose(huge.face("c/far").normal, [0, 0, -1])
 
 
+def prism(sides: int, radius: float = 0.03, height: float = 0.1) -> list[list[float]]:
+    angles = 2 * np.pi * np.arange(sides) / sides
+    return [[radius * np.cos(a), radius * np.sin(a), z] for a in angles for z in (0.0, height)]
+
+
+@pytest.mark.parametrize(("sides", "names"), [(32, 3), (16, 3), (8, 10), (6, 8)])
+def test_a_meshed_cylinders_sides_are_one_surface_a_polygons_are_not(sides, names):
+    """32 or 16 sections (11.25°, 22.5° apart): the sides are one face name, the lowest
+    ``f`` number, beside the two caps; an octagon's or hexagon's sides (45°, 60°) keep
+    their own."""
+    piece = convex_piece("p", prism(sides), pin.SE3.Identity())
+    assert len(piece.faces) == sides + 2
+    assert len({f.name for f in piece.faces}) == names
+    if names == 3:
+        sides_named = {f.name for f in piece.faces if abs(f.normal[2]) < 0.5}
+        assert sides_named == {"p/f0"}  # f0: the +x side, first by normal
+
+
+def test_a_named_facet_stays_out_of_a_smooth_surface():
+    half = np.pi / 32  # the first side facet's normal lies between its two edges
+    front = [np.cos(half), np.sin(half), 0.0]
+    piece = convex_piece("p", prism(32), pin.SE3.Identity(), {"front": front})
+    names = [f.name for f in piece.faces]
+    assert names.count("p/front") == 1
+    assert len(set(names)) == 4  # front, the other 31 sides, the two caps
+    assert max(names.count(n) for n in set(names)) == 31
+
+
+def test_the_built_in_tasks_have_no_smooth_surfaces():
+    """Every face of every piece of the built-ins keeps a name of its own: their modes,
+    and so their searches, are what they were before smooth surfaces."""
+    from bilba_dist.task.loader import builtin_tasks, load_task
+
+    for name in builtin_tasks():
+        task = load_task(name)
+        for piece in (*task.manipuland.pieces, *task.environment.pieces):
+            names = [f.name for f in piece.faces]
+            assert len(names) == len(set(names)), (name, piece.name)
+
+
+def test_a_contact_on_the_edge_between_two_sides_of_a_cylinder_is_one_pair():
+    from bilba_dist.geometry.labels import label_points
+    from bilba_dist.geometry.piece import Part
+
+    peg = Part("peg", (convex_piece("peg", prism(32), pin.SE3.Identity()),))
+    wall = box_piece("wall", [0.02, 0.2, 0.2], pin.SE3(np.eye(3), np.array([0.04, 0, 0.05])))
+    x, y, _ = prism(32)[0]
+    corner = np.array([[x, y, 0.05]])  # on the edge between two side facets
+    contacts = label_points(wall, peg, corner, np.array([[-1.0, 0, 0]]), corner, np.eye(3))
+    assert contacts == {("wall/-x", "peg/f0")}
+
+
 def test_pose_moves_vertices_and_face_planes():
     X = pose_from_xyz_rpy([1, 2, 3], [0, 0, np.pi / 2])
     box = box_piece("b", [2, 2, 2], X)

@@ -9,7 +9,9 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
+from itertools import combinations
 
+import networkx as nx
 import numpy as np
 import pinocchio as pin
 from scipy.spatial import HalfspaceIntersection
@@ -32,6 +34,11 @@ NAME_MATCH_ANGLE = np.deg2rad(1.0)
 CONVEX_TOL = 1e-9
 #: The name a facet gets when the task file names none for it (``f0``, ``f1``, …).
 UNNAMED = re.compile(r"f\d+")
+#: Unnamed facets of one piece that share an edge and whose normals differ by at most this
+#: are one smooth surface (a meshed cylinder's sides, 11.25° apart at 32 sections): one
+#: face name, so a contact anywhere on it is the same contact [rad]. A hexagon's or an
+#: octagon's sides (60°, 45°) and a chamfer (45°) stay faces of their own.
+SMOOTH_ANGLE = np.deg2rad(25.0)
 
 
 @dataclass(frozen=True)
@@ -115,7 +122,7 @@ def convex_piece(
     hull = convex_hull(points, f"piece {name!r}")
     _check_convex(name, points, hull)
     faces = planar_faces(points, hull)
-    names = _name_faces(name, faces, face_names or {})
+    names = _smooth_surfaces(faces, _name_faces(name, faces, face_names or {}))
     keep = np.array(sorted(hull.vertices))
     remap = {int(old): new for new, old in enumerate(keep)}
     R = X_PC.rotation
@@ -180,6 +187,26 @@ def _name_faces(
     if len(set(names)) != len(names):
         raise GeometryError(f"piece {piece!r}: two faces share a name in {sorted(names)}")
     return names
+
+
+def _smooth_surfaces(faces: list, names: list[str]) -> list[str]:
+    """``names`` with each smooth surface's unnamed facets (joined by edges, normals within
+    ``SMOOTH_ANGLE``) renamed to its first facet's name (the lowest ``f`` number). Faces
+    the task file named keep their names and join nothing."""
+    unnamed = [i for i, n in enumerate(names) if UNNAMED.fullmatch(n)]
+    graph = nx.Graph()
+    graph.add_nodes_from(unnamed)
+    cos = np.cos(SMOOTH_ANGLE)
+    for a, b in combinations(unnamed, 2):
+        shared = len(set(faces[a].vertices) & set(faces[b].vertices))
+        if shared >= 2 and faces[a].normal @ faces[b].normal >= cos:
+            graph.add_edge(a, b)
+    renamed = list(names)
+    for surface in nx.connected_components(graph):
+        first = min((names[i] for i in surface), key=lambda n: int(n[1:]))
+        for i in surface:
+            renamed[i] = first
+    return renamed
 
 
 @dataclass(frozen=True)
