@@ -1,3 +1,5 @@
+from pathlib import Path
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -5,9 +7,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from bilba_dist.errors import GeometryError
-from bilba_dist.geometry.piece import box_piece, convex_piece
+from bilba_dist.geometry.piece import box_piece, convex_piece, smooth_surfaces
 from bilba_dist.geometry.pose import pose_from_xyz_rpy, snap_rotation
 
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 CUBE = [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]
 
 
@@ -93,7 +96,7 @@ def test_a_meshed_cylinders_sides_are_one_surface_a_polygons_are_not(sides, name
     """32 or 16 sections (11.25°, 22.5° apart): the sides are one face name, the lowest
     ``f`` number, beside the two caps; an octagon's or hexagon's sides (45°, 60°) keep
     their own."""
-    piece = convex_piece("p", prism(sides), pin.SE3.Identity())
+    piece = smooth_surfaces(convex_piece("p", prism(sides), pin.SE3.Identity()))
     assert len(piece.faces) == sides + 2
     assert len({f.name for f in piece.faces}) == names
     if names == 3:
@@ -104,11 +107,26 @@ def test_a_meshed_cylinders_sides_are_one_surface_a_polygons_are_not(sides, name
 def test_a_named_facet_stays_out_of_a_smooth_surface():
     half = np.pi / 32  # the first side facet's normal lies between its two edges
     front = [np.cos(half), np.sin(half), 0.0]
-    piece = convex_piece("p", prism(32), pin.SE3.Identity(), {"front": front})
+    piece = smooth_surfaces(convex_piece("p", prism(32), pin.SE3.Identity(), {"front": front}))
     names = [f.name for f in piece.faces]
     assert names.count("p/front") == 1
     assert len(set(names)) == 4  # front, the other 31 sides, the two caps
     assert max(names.count(n) for n in set(names)) == 31
+
+
+def test_only_the_manipulands_smooth_surfaces_are_one_face():
+    """The meshed round peg's 32 sides are one face; the environment's facets keep their
+    names (its floor's round side too): where on a round wall a part touches is what a
+    motion funnels against."""
+    from bilba_dist.task.loader import load_task
+
+    task = load_task(str(EXAMPLES / "round-peg" / "round-peg.yaml"))
+    (peg,) = task.manipuland.pieces
+    assert len(peg.faces) == 34 and len({f.name for f in peg.faces}) == 3
+    for piece in task.environment.pieces:
+        assert len({f.name for f in piece.faces}) == len(piece.faces), piece.name
+    floor = next(p for p in task.environment.pieces if p.name == "floor")
+    assert len(floor.faces) > 40  # a round floor: smooth, but not made one
 
 
 def test_the_built_in_tasks_have_no_smooth_surfaces():
@@ -127,7 +145,7 @@ def test_a_contact_on_the_edge_between_two_sides_of_a_cylinder_is_one_pair():
     from bilba_dist.geometry.labels import label_points
     from bilba_dist.geometry.piece import Part
 
-    peg = Part("peg", (convex_piece("peg", prism(32), pin.SE3.Identity()),))
+    peg = Part("peg", (smooth_surfaces(convex_piece("peg", prism(32), pin.SE3.Identity())),))
     wall = box_piece("wall", [0.02, 0.2, 0.2], pin.SE3(np.eye(3), np.array([0.04, 0, 0.05])))
     x, y, _ = prism(32)[0]
     corner = np.array([[x, y, 0.05]])  # on the edge between two side facets

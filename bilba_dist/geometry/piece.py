@@ -122,7 +122,7 @@ def convex_piece(
     hull = convex_hull(points, f"piece {name!r}")
     _check_convex(name, points, hull)
     faces = planar_faces(points, hull)
-    names = _smooth_surfaces(faces, _name_faces(name, faces, face_names or {}))
+    names = _name_faces(name, faces, face_names or {})
     keep = np.array(sorted(hull.vertices))
     remap = {int(old): new for new, old in enumerate(keep)}
     R = X_PC.rotation
@@ -189,11 +189,13 @@ def _name_faces(
     return names
 
 
-def _smooth_surfaces(faces: list, names: list[str]) -> list[str]:
-    """``names`` with each smooth surface's unnamed facets (joined by edges, normals within
+def smooth_surfaces(piece: ConvexPiece) -> ConvexPiece:
+    """``piece`` with each smooth surface's unnamed facets (joined by edges, normals within
     ``SMOOTH_ANGLE``) renamed to its first facet's name (the lowest ``f`` number). Faces
     the task file named keep their names and join nothing."""
-    unnamed = [i for i, n in enumerate(names) if UNNAMED.fullmatch(n)]
+    faces = piece.faces
+    labels = [f.name.rpartition("/")[2] for f in faces]
+    unnamed = [i for i, label in enumerate(labels) if UNNAMED.fullmatch(label)]
     graph = nx.Graph()
     graph.add_nodes_from(unnamed)
     cos = np.cos(SMOOTH_ANGLE)
@@ -201,12 +203,14 @@ def _smooth_surfaces(faces: list, names: list[str]) -> list[str]:
         shared = len(set(faces[a].vertices) & set(faces[b].vertices))
         if shared >= 2 and faces[a].normal @ faces[b].normal >= cos:
             graph.add_edge(a, b)
-    renamed = list(names)
+    names = [f.name for f in faces]
     for surface in nx.connected_components(graph):
-        first = min((names[i] for i in surface), key=lambda n: int(n[1:]))
+        first = min(surface, key=lambda i: int(labels[i][1:]))
         for i in surface:
-            renamed[i] = first
-    return renamed
+            names[i] = faces[first].name
+    return replace(
+        piece, faces=tuple(replace(f, name=n) for f, n in zip(faces, names, strict=True))
+    )
 
 
 @dataclass(frozen=True)

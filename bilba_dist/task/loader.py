@@ -16,7 +16,7 @@ from pydantic import BaseModel, ValidationError
 from bilba_dist.errors import BilbaError, GeometryError, TaskError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.mesh import mesh_bodies
-from bilba_dist.geometry.piece import Part, box_piece, convex_piece
+from bilba_dist.geometry.piece import Part, box_piece, convex_piece, smooth_surfaces
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
     MAX_PIECES,
@@ -152,7 +152,7 @@ def parse_overrides(items: Iterable[str]) -> dict[str, float]:
 
 
 def build_task(spec: TaskSpec, source: str) -> Task:
-    manipuland = build_part(spec.manipuland)
+    manipuland = build_part(spec.manipuland, smooth=True)
     environment = build_part(spec.environment)
     goal = ContactPair(spec.goal.env, spec.goal.manip)
     for part, face, key in (
@@ -282,7 +282,10 @@ def with_meshes_loaded(
     return spec.model_copy(update=parts)
 
 
-def build_part(spec: PartSpec) -> Part:
+def build_part(spec: PartSpec, smooth: bool = False) -> Part:
+    """The part's pieces; with ``smooth`` (the manipuland's), each piece's smooth surfaces
+    made one face (geometry/piece.py ``smooth_surfaces``): which side of a round part
+    touches says nothing a motion needs, where on a round wall it touches does."""
     pieces = []
     for piece in spec.pieces:
         X = to_pose(piece.pose)
@@ -290,7 +293,7 @@ def build_part(spec: PartSpec) -> Part:
             pieces.append(box_piece(piece.name, piece.box.size, X))
         elif piece.convex is not None:
             pieces.append(convex_piece(piece.name, piece.convex.vertices, X, piece.convex.faces))
-    return Part(spec.name, tuple(pieces))
+    return Part(spec.name, tuple(smooth_surfaces(p) if smooth else p for p in pieces))
 
 
 def describe_error(
