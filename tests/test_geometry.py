@@ -114,19 +114,35 @@ def test_a_named_facet_stays_out_of_a_smooth_surface():
     assert max(names.count(n) for n in set(names)) == 31
 
 
-def test_only_the_manipulands_smooth_surfaces_are_one_face():
-    """The meshed round peg's 32 sides are one face; the environment's facets keep their
-    names (its floor's round side too): where on a round wall a part touches is what a
-    motion funnels against."""
+def test_an_environments_smooth_surface_is_cut_into_patches():
+    """With a spread (the environment's), a cylinder's sides become patches of facets whose
+    normals all lie within it of each other: a round wall is not one face, whose contacts
+    on opposite sides would be one contact."""
+    from bilba_dist.geometry.piece import SMOOTH_ANGLE
+
+    piece = smooth_surfaces(convex_piece("p", prism(32), pin.SE3.Identity()), SMOOTH_ANGLE)
+    sides = [f for f in piece.faces if abs(f.normal[2]) < 0.5]
+    patches: dict[str, list[np.ndarray]] = {}
+    for f in sides:
+        patches.setdefault(f.name, []).append(f.normal)
+    assert 11 <= len(patches) < 32  # 32 sides 11.25° apart: at most 3 a patch
+    for normals in patches.values():
+        assert min(a @ b for a in normals for b in normals) >= np.cos(SMOOTH_ANGLE) - 1e-12
+
+
+def test_the_round_peg_example_has_one_side_face_and_a_patched_floor():
+    from bilba_dist.geometry.piece import SMOOTH_ANGLE
     from bilba_dist.task.loader import load_task
 
     task = load_task(str(EXAMPLES / "round-peg" / "round-peg.yaml"))
     (peg,) = task.manipuland.pieces
     assert len(peg.faces) == 34 and len({f.name for f in peg.faces}) == 3
-    for piece in task.environment.pieces:
-        assert len({f.name for f in piece.faces}) == len(piece.faces), piece.name
     floor = next(p for p in task.environment.pieces if p.name == "floor")
-    assert len(floor.faces) > 40  # a round floor: smooth, but not made one
+    assert 2 < len({f.name for f in floor.faces}) < len(floor.faces)
+    for piece in task.environment.pieces:
+        for name in {f.name for f in piece.faces}:
+            normals = [f.normal for f in piece.faces if f.name == name]
+            assert min(a @ b for a in normals for b in normals) >= np.cos(SMOOTH_ANGLE) - 1e-12
 
 
 def test_the_built_in_tasks_have_no_smooth_surfaces():

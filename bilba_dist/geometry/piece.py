@@ -37,7 +37,8 @@ UNNAMED = re.compile(r"f\d+")
 #: Unnamed facets of one piece that share an edge and whose normals differ by at most this
 #: are one smooth surface (a meshed cylinder's sides, 11.25° apart at 32 sections): one
 #: face name, so a contact anywhere on it is the same contact [rad]. A hexagon's or an
-#: octagon's sides (60°, 45°) and a chamfer (45°) stay faces of their own.
+#: octagon's sides (60°, 45°) and a chamfer (45°) stay faces of their own. On the
+#: environment it is also the most a surface's normals may differ (task/loader.py).
 SMOOTH_ANGLE = np.deg2rad(25.0)
 
 
@@ -189,10 +190,12 @@ def _name_faces(
     return names
 
 
-def smooth_surfaces(piece: ConvexPiece) -> ConvexPiece:
+def smooth_surfaces(piece: ConvexPiece, spread: float | None = None) -> ConvexPiece:
     """``piece`` with each smooth surface's unnamed facets (joined by edges, normals within
-    ``SMOOTH_ANGLE``) renamed to its first facet's name (the lowest ``f`` number). Faces
-    the task file named keep their names and join nothing."""
+    ``SMOOTH_ANGLE``) renamed to its first facet's name (the lowest ``f`` number). With
+    ``spread``, a surface is cut into patches whose normals all lie within it of each other
+    (each facet, in order, joins the first patch it touches and fits). Faces the task file
+    named keep their names and join nothing."""
     faces = piece.faces
     labels = [f.name.rpartition("/")[2] for f in faces]
     unnamed = [i for i, label in enumerate(labels) if UNNAMED.fullmatch(label)]
@@ -204,13 +207,34 @@ def smooth_surfaces(piece: ConvexPiece) -> ConvexPiece:
         if shared >= 2 and faces[a].normal @ faces[b].normal >= cos:
             graph.add_edge(a, b)
     names = [f.name for f in faces]
-    for surface in nx.connected_components(graph):
+    surfaces: list[set[int]] = list(nx.connected_components(graph))
+    if spread is not None:
+        surfaces = [patch for s in surfaces for patch in _patches(faces, sorted(s), graph, spread)]
+    for surface in surfaces:
         first = min(surface, key=lambda i: int(labels[i][1:]))
         for i in surface:
             names[i] = faces[first].name
     return replace(
         piece, faces=tuple(replace(f, name=n) for f, n in zip(faces, names, strict=True))
     )
+
+
+def _patches(
+    faces: Sequence[Face], members: list[int], graph: nx.Graph, spread: float
+) -> list[set[int]]:
+    """``members`` (one smooth surface, in order) as patches: a facet joins the first patch
+    it shares an edge with whose every normal lies within ``spread`` of its own."""
+    patches: list[set[int]] = []
+    cos = np.cos(spread)
+    for i in members:
+        for patch in patches:
+            touches = any(graph.has_edge(i, j) for j in patch)
+            if touches and all(faces[i].normal @ faces[j].normal >= cos for j in patch):
+                patch.add(i)
+                break
+        else:
+            patches.append({i})
+    return patches
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,13 @@ from pydantic import BaseModel, ValidationError
 from bilba_dist.errors import BilbaError, GeometryError, TaskError
 from bilba_dist.geometry.contact import ContactPair
 from bilba_dist.geometry.mesh import mesh_bodies
-from bilba_dist.geometry.piece import Part, box_piece, convex_piece, smooth_surfaces
+from bilba_dist.geometry.piece import (
+    SMOOTH_ANGLE,
+    Part,
+    box_piece,
+    convex_piece,
+    smooth_surfaces,
+)
 from bilba_dist.geometry.pose import pose_from_xyz_rpy
 from bilba_dist.task.schema import (
     MAX_PIECES,
@@ -152,8 +158,8 @@ def parse_overrides(items: Iterable[str]) -> dict[str, float]:
 
 
 def build_task(spec: TaskSpec, source: str) -> Task:
-    manipuland = build_part(spec.manipuland, smooth=True)
-    environment = build_part(spec.environment)
+    manipuland = build_part(spec.manipuland)
+    environment = build_part(spec.environment, spread=SMOOTH_ANGLE)
     goal = ContactPair(spec.goal.env, spec.goal.manip)
     for part, face, key in (
         (environment, goal.env, "goal.env"),
@@ -282,10 +288,12 @@ def with_meshes_loaded(
     return spec.model_copy(update=parts)
 
 
-def build_part(spec: PartSpec, smooth: bool = False) -> Part:
-    """The part's pieces; with ``smooth`` (the manipuland's), each piece's smooth surfaces
-    made one face (geometry/piece.py ``smooth_surfaces``): which side of a round part
-    touches says nothing a motion needs, where on a round wall it touches does."""
+def build_part(spec: PartSpec, spread: float | None = None) -> Part:
+    """The part's pieces, each one's smooth surfaces made one face (geometry/piece.py
+    ``smooth_surfaces``). The environment's (``spread``) are cut into patches whose normals
+    differ by at most that: its face says where in the world the part touches, and a
+    round wall made one face would call contacts on opposite sides one contact; which side
+    of a round part touches says nothing a motion needs."""
     pieces = []
     for piece in spec.pieces:
         X = to_pose(piece.pose)
@@ -293,7 +301,7 @@ def build_part(spec: PartSpec, smooth: bool = False) -> Part:
             pieces.append(box_piece(piece.name, piece.box.size, X))
         elif piece.convex is not None:
             pieces.append(convex_piece(piece.name, piece.convex.vertices, X, piece.convex.faces))
-    return Part(spec.name, tuple(smooth_surfaces(p) if smooth else p for p in pieces))
+    return Part(spec.name, tuple(smooth_surfaces(p, spread) for p in pieces))
 
 
 def describe_error(
