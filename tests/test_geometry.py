@@ -145,6 +145,27 @@ def test_the_round_peg_example_has_one_side_face_and_a_patched_floor():
             assert min(a @ b for a in normals for b in normals) >= np.cos(SMOOTH_ANGLE) - 1e-12
 
 
+def test_a_goal_given_as_an_unnamed_facet_stays_a_face(tmp_path):
+    """A goal on the peg's facet f5 (one of its round sides) still names that facet."""
+    import yaml
+
+    from bilba_dist.task.loader import load_task
+
+    folder = EXAMPLES / "round-peg"
+    data = yaml.safe_load((folder / "round-peg.yaml").read_text())
+    for part in ("manipuland", "environment"):
+        for piece in data[part]["pieces"]:
+            piece["mesh"]["file"] = str(folder / piece["mesh"]["file"])
+    data["goal"] = {"env": "plate_4/f1", "manip": "peg/f5"}
+    path = tmp_path / "side-goal.yaml"
+    path.write_text(yaml.safe_dump(data))
+    task = load_task(str(path))
+    names = [f.name for f in task.manipuland.pieces[0].faces]
+    assert names.count("peg/f5") == 1 and names.count("peg/f0") == 31
+    plate = task.environment.piece("plate_4/f1")
+    assert [f.name for f in plate.faces].count("plate_4/f1") == 1
+
+
 def test_the_built_in_tasks_have_no_smooth_surfaces():
     """Every face of every piece of the built-ins keeps a name of its own: their modes,
     and so their searches, are what they were before smooth surfaces."""

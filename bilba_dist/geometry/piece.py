@@ -190,15 +190,21 @@ def _name_faces(
     return names
 
 
-def smooth_surfaces(piece: ConvexPiece, spread: float | None = None) -> ConvexPiece:
+def smooth_surfaces(
+    piece: ConvexPiece, spread: float | None = None, keep: frozenset[str] = frozenset()
+) -> ConvexPiece:
     """``piece`` with each smooth surface's unnamed facets (joined by edges, normals within
     ``SMOOTH_ANGLE``) renamed to its first facet's name (the lowest ``f`` number). With
     ``spread``, a surface is cut into patches whose normals all lie within it of each other
     (each facet, in order, joins the first patch it touches and fits). Faces the task file
-    named keep their names and join nothing."""
+    named, and those in ``keep`` (a goal given as ``piece/f7``), join nothing."""
     faces = piece.faces
     labels = [f.name.rpartition("/")[2] for f in faces]
-    unnamed = [i for i, label in enumerate(labels) if UNNAMED.fullmatch(label)]
+    unnamed = [
+        i
+        for i, label in enumerate(labels)
+        if UNNAMED.fullmatch(label) and faces[i].name not in keep
+    ]
     graph = nx.Graph()
     graph.add_nodes_from(unnamed)
     cos = np.cos(SMOOTH_ANGLE)

@@ -158,8 +158,9 @@ def parse_overrides(items: Iterable[str]) -> dict[str, float]:
 
 
 def build_task(spec: TaskSpec, source: str) -> Task:
-    manipuland = build_part(spec.manipuland)
-    environment = build_part(spec.environment, spread=SMOOTH_ANGLE)
+    keep = frozenset({spec.goal.env, spec.goal.manip})
+    manipuland = build_part(spec.manipuland, keep=keep)
+    environment = build_part(spec.environment, spread=SMOOTH_ANGLE, keep=keep)
     goal = ContactPair(spec.goal.env, spec.goal.manip)
     for part, face, key in (
         (environment, goal.env, "goal.env"),
@@ -288,12 +289,15 @@ def with_meshes_loaded(
     return spec.model_copy(update=parts)
 
 
-def build_part(spec: PartSpec, spread: float | None = None) -> Part:
+def build_part(
+    spec: PartSpec, spread: float | None = None, keep: frozenset[str] = frozenset()
+) -> Part:
     """The part's pieces, each one's smooth surfaces made one face (geometry/piece.py
     ``smooth_surfaces``). The environment's (``spread``) are cut into patches whose normals
     differ by at most that: its face says where in the world the part touches, and a
     round wall made one face would call contacts on opposite sides one contact; which side
-    of a round part touches says nothing a motion needs."""
+    of a round part touches says nothing a motion needs. Faces in ``keep`` (the goal's)
+    stay apart."""
     pieces = []
     for piece in spec.pieces:
         X = to_pose(piece.pose)
@@ -301,7 +305,7 @@ def build_part(spec: PartSpec, spread: float | None = None) -> Part:
             pieces.append(box_piece(piece.name, piece.box.size, X))
         elif piece.convex is not None:
             pieces.append(convex_piece(piece.name, piece.convex.vertices, X, piece.convex.faces))
-    return Part(spec.name, tuple(smooth_surfaces(p, spread) for p in pieces))
+    return Part(spec.name, tuple(smooth_surfaces(p, spread, keep) for p in pieces))
 
 
 def describe_error(
