@@ -9,7 +9,6 @@ import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 from functools import cached_property
-from itertools import combinations
 
 import networkx as nx
 import numpy as np
@@ -208,10 +207,14 @@ def smooth_surfaces(
     graph = nx.Graph()
     graph.add_nodes_from(unnamed)
     cos = np.cos(SMOOTH_ANGLE)
-    for a, b in combinations(unnamed, 2):
-        shared = len(set(faces[a].vertices) & set(faces[b].vertices))
-        if shared >= 2 and faces[a].normal @ faces[b].normal >= cos:
-            graph.add_edge(a, b)
+    by_edge: dict[tuple[int, int], list[int]] = {}  # each hull edge: the two faces along it
+    for i in unnamed:
+        ring = faces[i].vertices
+        for u, v in zip(ring, ring[1:] + ring[:1], strict=True):
+            by_edge.setdefault((min(u, v), max(u, v)), []).append(i)
+    for pair in by_edge.values():
+        if len(pair) == 2 and faces[pair[0]].normal @ faces[pair[1]].normal >= cos:
+            graph.add_edge(*pair)
     names = [f.name for f in faces]
     surfaces: list[set[int]] = list(nx.connected_components(graph))
     if spread is not None:
@@ -231,14 +234,17 @@ def _patches(
     """``members`` (one smooth surface, in order) as patches: a facet joins the first patch
     it shares an edge with whose every normal lies within ``spread`` of its own."""
     patches: list[set[int]] = []
+    patch_of: dict[int, int] = {}
     cos = np.cos(spread)
     for i in members:
-        for patch in patches:
-            touches = any(graph.has_edge(i, j) for j in patch)
-            if touches and all(faces[i].normal @ faces[j].normal >= cos for j in patch):
-                patch.add(i)
+        touching = sorted({patch_of[j] for j in graph.neighbors(i) if j in patch_of})
+        for k in touching:
+            if all(faces[i].normal @ faces[j].normal >= cos for j in patches[k]):
+                patches[k].add(i)
+                patch_of[i] = k
                 break
         else:
+            patch_of[i] = len(patches)
             patches.append({i})
     return patches
 
