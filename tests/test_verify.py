@@ -96,6 +96,18 @@ def test_a_plan_that_fails_verification_is_not_returned_while_time_is_left(monke
     assert [m.G_d for m in result.motions] == [m.G_d for m in first.motions]
 
 
+def test_of_plans_that_fail_verification_the_one_kept_lost_least():
+    """The worst fraction first, then the mean: a later plan that loses an offset only at
+    0.5 μ replaces one that lost it at 0.5 and 1 μ (puzzle grasp.x ±1 cm, seed 0: its
+    third plan), so the hint names what the kept plan lost."""
+    twice = Verification(42, {"0.5": 13 / 14, "1": 13 / 14, "1.5": 1.0}, passed=False)
+    once = Verification(42, {"0.5": 13 / 14, "1": 1.0, "1.5": 1.0}, passed=False)
+    worse = Verification(42, {"0.5": 12 / 14, "1": 1.0, "1.5": 1.0}, passed=False)
+    assert once.holds_better_than(twice) and not twice.holds_better_than(once)
+    assert not once.holds_better_than(once)  # a tie keeps the earlier plan
+    assert twice.holds_better_than(worse) and not worse.holds_better_than(twice)
+
+
 @pytest.mark.parametrize(
     ("planner", "words"),
     [

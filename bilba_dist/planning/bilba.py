@@ -519,7 +519,7 @@ def _verify(
     if verification.passed:
         return []
     best = result.unverified
-    if best is None or min(verification.held.values()) > min(best[1].held.values()):
+    if best is None or verification.holds_better_than(best[1]):
         result.unverified = (motions, verification)
     result.reason = f"a plan failed verification on {verification.text()} (planner.verify_min)"
     return failed
