@@ -310,3 +310,32 @@ def test_clip_is_the_polygon_cut_by_every_half_plane(corners, planes):
     assert abs(got.area - expected.area) < 1e-9
     if expected.area > 1e-6:
         assert got.symmetric_difference(expected).area < 1e-9
+
+
+def test_contact_sets_match_every_facet_measured(puzzle):
+    """``contacts`` measures each point against the facets of the pieces whose box holds it
+    and unions labels once per set of facets; measured here against every facet of every
+    polytope (the definition): the puzzle's vertices, points sampled on its modes, probes
+    around the vertices and points off the boundary (inside and outside)."""
+    cslice = CObsSlice.build(puzzle.environment, puzzle.manipuland, np.eye(3))
+    rng = np.random.default_rng(5)
+    modes = sorted({m for c in cslice.vertex_contacts for m in c})[:12]
+    on = [cslice.sample_mode(m, 20, rng) for m in modes]
+    probes = cslice.vertices + rng.normal(scale=1e-5, size=cslice.vertices.shape)
+    off = rng.uniform(-0.1, 0.1, size=(200, 3)) + cslice.vertices.mean(axis=0)
+    points = np.concatenate([cslice.vertices, *on, probes, off])
+
+    def expected(x: np.ndarray) -> frozenset[ContactPair]:
+        slacks = [p.A @ x - p.b for p in cslice.polytopes]
+        if any(s.max() < -TOL for s in slacks):  # inside a polytope: not on the boundary
+            return frozenset()
+        labels: set[ContactPair] = set()
+        for p, s in zip(cslice.polytopes, slacks, strict=True):
+            if abs(s.max()) <= TOL:
+                for f in np.flatnonzero(np.abs(s) <= TOL):
+                    labels |= p.labels[f]
+        return frozenset(labels)
+
+    found = cslice.contacts(points)
+    assert found == tuple(expected(x) for x in points)
+    assert sum(bool(c) for c in found) > len(cslice.vertices)  # the samples are on it too

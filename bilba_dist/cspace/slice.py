@@ -43,6 +43,15 @@ class CObsSlice:
     _regions: dict[ContactPair, tuple[np.ndarray, np.ndarray]] = field(
         default_factory=dict, repr=False, compare=False
     )
+    #: Per (polytope, facet), its region (``_facet_region``): a facet with several labels
+    #: is the region of each of their modes
+    _facet_regions: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = field(
+        default_factory=dict, repr=False, compare=False
+    )
+    #: Per set of facets, the union of their labels (``_labels_of``)
+    _label_sets: dict[tuple[int, ...], ContactSet] = field(
+        default_factory=dict, repr=False, compare=False
+    )
 
     @classmethod
     def build(cls, environment: Part, manipuland: Part, R_OM: np.ndarray) -> "CObsSlice":
@@ -105,17 +114,28 @@ class CObsSlice:
         polytope it is on the boundary of; empty for points not on the slice's boundary."""
         points = np.atleast_2d(points)
         result: list[ContactSet] = []
-        for start in range(0, len(points), CHUNK_POINTS):  # (N, F) arrays: bounded memory
-            on_union, on_facet = self._on_facets(points[start : start + CHUNK_POINTS])
-            for on, facets in zip(on_union, on_facet, strict=True):
-                if not on:
-                    result.append(frozenset())
-                    continue
-                labels: set[ContactPair] = set()
-                for f in np.flatnonzero(facets):
-                    labels |= self._facet_labels[f]
-                result.append(frozenset(labels))
+        for start in range(0, len(points), CHUNK_POINTS):  # bounded memory
+            on_union, rows, facets = self._facet_hits(points[start : start + CHUNK_POINTS])
+            chunk: list[ContactSet] = [frozenset()] * len(on_union)
+            keep = on_union[rows]
+            rows, facets = rows[keep], facets[keep]
+            cut = np.flatnonzero(np.diff(rows)) + 1  # the facets of each point, grouped
+            firsts, groups = (
+                (rows[np.r_[0, cut]], np.split(facets, cut)) if len(rows) else (rows, [])
+            )
+            for row, group in zip(firsts.tolist(), groups, strict=True):
+                chunk[row] = self._labels_of(tuple(group.tolist()))
+            result += chunk
         return tuple(result)
+
+    def _labels_of(self, facets: tuple[int, ...]) -> ContactSet:
+        """The union of ``facets``' labels, once per set of facets (the boundary's points
+        lie on a few hundred such sets: a vertex's probes share their facets)."""
+        labels = self._label_sets.get(facets)
+        if labels is None:
+            labels = frozenset().union(*(self._facet_labels[f] for f in facets))
+            self._label_sets[facets] = labels
+        return labels
 
     def in_mode(self, points: np.ndarray, mode: ContactPair) -> np.ndarray:
         """Whether each point lies on the boundary region of ``mode``."""
@@ -125,12 +145,20 @@ class CObsSlice:
 
     def _on_facets(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Per point, whether it is on the union's boundary or outside it (N,), and which
-        facets it lies on, each on its own polytope's surface (N, F); within TOL. A point
-        outside a polytope's box (by more than BOX_MARGIN) is outside it: only the points
-        in its box are measured against its facets (a part split into tens of pieces has
-        thousands of facets, and each point is near a few pieces)."""
-        inside = np.zeros(len(points), dtype=bool)  # strictly inside some polytope
+        facets it lies on, each on its own polytope's surface (N, F); within TOL."""
+        on_union, rows, facets = self._facet_hits(points)
         on_facet = np.zeros((len(points), len(self.stack.b)), dtype=bool)
+        on_facet[rows, facets] = True
+        return on_union, on_facet
+
+    def _facet_hits(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``_on_facets`` with the facets as (point, facet) index pairs, sorted by point and
+        then facet: a point lies on a few of thousands. A point outside a polytope's box (by
+        more than BOX_MARGIN) is outside it: only the points in its box are measured against
+        its facets (a part split into tens of pieces has thousands of facets, and each point
+        is near a few pieces)."""
+        inside = np.zeros(len(points), dtype=bool)  # strictly inside some polytope
+        rows, facets = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
         for p, start in zip(self.polytopes, self.stack.starts, strict=True):
             box = (points >= p.lower - BOX_MARGIN) & (points <= p.upper + BOX_MARGIN)
             near = np.flatnonzero(box.all(axis=1))
@@ -139,10 +167,12 @@ class CObsSlice:
             facet = points[near] @ p.A.T - p.b
             per_polytope = facet.max(axis=1)
             inside[near] |= per_polytope < -TOL
-            on_facet[near, start : start + len(p.b)] = (np.abs(facet) <= TOL) & (
-                np.abs(per_polytope) <= TOL
-            )[:, None]
-        return ~inside, on_facet
+            r, f = np.nonzero((np.abs(facet) <= TOL) & (np.abs(per_polytope) <= TOL)[:, None])
+            rows.append(near[r])
+            facets.append(start + f)
+        row, facet = np.concatenate(rows), np.concatenate(facets)
+        order = np.lexsort((facet, row))
+        return ~inside, row[order], facet[order]
 
     def mode_facets(self, mode: ContactPair) -> list[tuple[int, int]]:
         """(polytope, facet) indices of every facet labelled with ``mode``."""
@@ -182,7 +212,7 @@ class CObsSlice:
         the puzzle's goal is 0.5 × 1 mm of a 160 × 42 mm facet — so points are drawn in the
         region itself, not in the facet and then rejected."""
         if mode not in self._regions:
-            found = [_facet_region(self.polytopes, i, f) for i, f in self.mode_facets(mode)]
+            found = [self._facet_region(i, f) for i, f in self.mode_facets(mode)]
             triangles = [t for t, _ in found if len(t)]
             normals = [m for t, m in found if len(t)]
             self._regions[mode] = (
@@ -191,6 +221,11 @@ class CObsSlice:
                 else (np.zeros((0, 3, 3)), np.zeros((0, 3)))
             )
         return self._regions[mode]
+
+    def _facet_region(self, i: int, f: int) -> tuple[np.ndarray, np.ndarray]:
+        if (i, f) not in self._facet_regions:
+            self._facet_regions[i, f] = _facet_region(self.polytopes, i, f)
+        return self._facet_regions[i, f]
 
     def mode_vertices(self, mode: ContactPair) -> np.ndarray:
         """The boundary vertices at the edge of ``mode``'s region (see ``vertex_modes``)."""
