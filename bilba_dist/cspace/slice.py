@@ -89,14 +89,19 @@ class CObsSlice:
         V = self.vertices
         if len(V) == 0:
             return ()
-        vertex, f = np.nonzero(self._on_facets(V)[1])
+        _, vertex, f = self._facet_hits(V)
         e1, e2 = plane_axes(self.stack.A[f])
         directions = np.cos(PROBE_ANGLES)[None, :, None] * e1[:, None, :]
         directions += np.sin(PROBE_ANGLES)[None, :, None] * e2[:, None, :]
         probes = V[vertex][:, None, :] + PROBE_M * directions
         nearby: list[set[ContactPair]] = [set() for _ in V]
         owner = np.repeat(vertex, len(PROBE_ANGLES))
-        for k, contacts in zip(owner, self.contacts(probes.reshape(-1, 3)), strict=True):
+        # A probe is PROBE_M from its vertex, so only the polytopes that vertex is within
+        # PROBE_M of (facet normals are unit) can hold it or have it on a facet
+        near = self.stack.slack(V) <= PROBE_M + BOX_MARGIN
+        for k, contacts in zip(
+            owner, self._contacts(probes.reshape(-1, 3), near[owner]), strict=True
+        ):
             nearby[k] |= contacts
         return tuple(frozenset(c & n) for c, n in zip(self.vertex_contacts, nearby, strict=True))
 
@@ -112,19 +117,27 @@ class CObsSlice:
     def contacts(self, points: np.ndarray) -> tuple[ContactSet, ...]:
         """The contact set at each point: the labels of every facet it lies on, of every
         polytope it is on the boundary of; empty for points not on the slice's boundary."""
-        points = np.atleast_2d(points)
+        return self._contacts(np.atleast_2d(points))
+
+    def _contacts(
+        self, points: np.ndarray, near: np.ndarray | None = None
+    ) -> tuple[ContactSet, ...]:
+        """``contacts``, measuring each point only against the polytopes ``near`` (N, P)
+        allows, when given (`_facet_hits`)."""
         result: list[ContactSet] = []
         for start in range(0, len(points), CHUNK_POINTS):  # bounded memory
-            on_union, rows, facets = self._facet_hits(points[start : start + CHUNK_POINTS])
+            chunk_near = None if near is None else near[start : start + CHUNK_POINTS]
+            on_union, rows, facets = self._facet_hits(
+                points[start : start + CHUNK_POINTS], chunk_near
+            )
             chunk: list[ContactSet] = [frozenset()] * len(on_union)
             keep = on_union[rows]
             rows, facets = rows[keep], facets[keep]
-            cut = np.flatnonzero(np.diff(rows)) + 1  # the facets of each point, grouped
-            firsts, groups = (
-                (rows[np.r_[0, cut]], np.split(facets, cut)) if len(rows) else (rows, [])
-            )
-            for row, group in zip(firsts.tolist(), groups, strict=True):
-                chunk[row] = self._labels_of(tuple(group.tolist()))
+            if len(rows):  # the facets of each point, grouped: point rows[a] has facets[a:b]
+                ends = [*(np.flatnonzero(np.diff(rows)) + 1).tolist(), len(rows)]
+                starts, listed = [0, *ends[:-1]], facets.tolist()
+                for row, a, b in zip(rows[starts].tolist(), starts, ends, strict=True):
+                    chunk[row] = self._labels_of(tuple(listed[a:b]))
             result += chunk
         return tuple(result)
 
@@ -151,24 +164,31 @@ class CObsSlice:
         on_facet[rows, facets] = True
         return on_union, on_facet
 
-    def _facet_hits(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _facet_hits(
+        self, points: np.ndarray, near: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``_on_facets`` with the facets as (point, facet) index pairs, sorted by point and
         then facet: a point lies on a few of thousands. A point outside a polytope's box (by
         more than BOX_MARGIN) is outside it: only the points in its box are measured against
         its facets (a part split into tens of pieces has thousands of facets, and each point
-        is near a few pieces)."""
+        is near a few pieces). ``near`` (N, P), when given, rules out more: a point is
+        measured against polytope k only where ``near[:, k]``, which must hold wherever the
+        point may be inside it or on its surface."""
         inside = np.zeros(len(points), dtype=bool)  # strictly inside some polytope
         rows, facets = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
-        for p, start in zip(self.polytopes, self.stack.starts, strict=True):
-            box = (points >= p.lower - BOX_MARGIN) & (points <= p.upper + BOX_MARGIN)
-            near = np.flatnonzero(box.all(axis=1))
-            if len(near) == 0:
+        for k, (p, start) in enumerate(zip(self.polytopes, self.stack.starts, strict=True)):
+            measured = np.arange(len(points)) if near is None else np.flatnonzero(near[:, k])
+            box = (points[measured] >= p.lower - BOX_MARGIN) & (
+                points[measured] <= p.upper + BOX_MARGIN
+            )
+            measured = measured[box.all(axis=1)]
+            if len(measured) == 0:
                 continue
-            facet = points[near] @ p.A.T - p.b
+            facet = points[measured] @ p.A.T - p.b
             per_polytope = facet.max(axis=1)
-            inside[near] |= per_polytope < -TOL
+            inside[measured] |= per_polytope < -TOL
             r, f = np.nonzero((np.abs(facet) <= TOL) & (np.abs(per_polytope) <= TOL)[:, None])
-            rows.append(near[r])
+            rows.append(measured[r])
             facets.append(start + f)
         row, facet = np.concatenate(rows), np.concatenate(facets)
         order = np.lexsort((facet, row))
