@@ -139,6 +139,9 @@ class FacetStack:
         self.b = np.concatenate([p.b for p in polytopes])
         counts = [len(p.b) for p in polytopes]
         self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+        self.owner = np.repeat(np.arange(len(polytopes)), counts)  # each facet's polytope
+        self.lower = np.array([p.lower for p in polytopes]).reshape(-1, 3)  # their boxes
+        self.upper = np.array([p.upper for p in polytopes]).reshape(-1, 3)
 
     def facet_slack(self, points: np.ndarray) -> np.ndarray:
         """(N, F) signed distance of each point to each facet plane [m]."""
