@@ -1,11 +1,13 @@
-"""Time to build the C-obs slice and the mode graph, per built-in task, on one core.
+"""Time to build the C-obs slice and the mode graph, per task, on one core.
 
-    .venv/bin/python benchmarks/geometry.py [--repeats 7]
+    .venv/bin/python benchmarks/geometry.py [--repeats 7] [--tasks peg-in-hole puzzle ...]
 
+Tasks: the built-ins, `round-peg` (examples/round-peg: meshed, its plate split into 16
+pieces), `round` (generality.py's 32-sided peg in a hole of 32 wall pieces), or a task file.
 Each repeat builds from scratch (no slice cache) for the nominal particle of the task's own
 belief, and separately times the whole `belief_graph` call (all it takes to get a schedule).
 Prints a table of medians and ends with one JSON line (times in keys ending `_s`).
-Target (issue 2): slice + graph under 1 s per task on one core.
+Target (issue 2): slice + graph under 1 s per task on one core (the built-ins).
 """
 
 import argparse
@@ -13,19 +15,33 @@ import json
 import os
 import platform
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
+from generality import SHAPES, write_task  # benchmarks/generality.py
 
 from bilba_dist.belief.particles import initial_belief
 from bilba_dist.cspace.slice import CObsSlice
 from bilba_dist.modes.graph import build_mode_graph
 from bilba_dist.modes.schedule import SliceCache, belief_graph, graph_params
-from bilba_dist.task.loader import load_task
+from bilba_dist.task.loader import Task, load_task
+
+ROOT = Path(__file__).resolve().parents[1]
+TASKS = ["peg-in-hole", "puzzle", "round-peg", "round"]
 
 
-def measure(name: str, repeats: int) -> dict[str, float]:
-    task = load_task(name)
+def task_for(name: str, folder: Path) -> Task:
+    """A built-in or a task file by name; `round-peg`: the example; a generality.py shape."""
+    if name == "round-peg":
+        return load_task(ROOT / "examples" / "round-peg" / "round-peg.yaml")
+    if name in SHAPES:
+        return load_task(write_task(folder, name, {}))
+    return load_task(name)
+
+
+def measure(task: Task, repeats: int) -> dict[str, float]:
     particles = initial_belief(task)
     poses = [p.X_OM(task.X_WG0) for p in particles]
     positions = np.array([X.translation for X in poses])
@@ -59,9 +75,11 @@ def measure(name: str, repeats: int) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--tasks", nargs="+", default=TASKS)
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
-    results = {name: measure(name, args.repeats) for name in ("peg-in-hole", "puzzle")}
+    folder = Path(tempfile.mkdtemp(prefix="bilba_geometry_"))
+    results = {name: measure(task_for(name, folder), args.repeats) for name in args.tasks}
     print(
         f"machine: {platform.node()} {platform.machine()}, {os.cpu_count()} cores; "
         f"medians of {args.repeats} runs, one core"
