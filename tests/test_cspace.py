@@ -370,3 +370,17 @@ def test_facet_triples_solved_together_are_those_solved_one_by_one(monkeypatch):
     monkeypatch.setattr(boundary_module, "TRIPLES_AT_ONCE", 1)
     alone = CObsSlice.build(task.environment, task.manipuland, np.eye(3)).vertices
     assert len(together) > 1000 and np.array_equal(together, alone)
+
+
+def test_strictly_inside_is_the_least_slack_below_minus_tol():
+    """`FacetStack.strictly_inside` measures a point only against the polytopes whose box
+    holds it; the definition measures it against every facet: the same answer for points
+    inside, outside and on the round-peg plate's 17 polytopes (its boundary vertices)."""
+    task = load_task(EXAMPLES / "round-peg" / "round-peg.yaml")
+    cslice = CObsSlice.build(task.environment, task.manipuland, np.eye(3))
+    rng = np.random.default_rng(11)
+    spread = rng.uniform(-0.1, 0.1, size=(3000, 3)) + cslice.vertices.mean(axis=0)
+    points = np.concatenate([spread, cslice.vertices])
+    found = cslice.stack.strictly_inside(points)
+    assert np.array_equal(found, cslice.stack.slack(points).min(axis=1) < -TOL)
+    assert 0 < found.sum() < len(spread)  # some of each

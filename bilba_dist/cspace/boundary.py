@@ -50,8 +50,7 @@ def boundary_vertices(polytopes: list[Polytope], stack: "FacetStack") -> np.ndar
             _facet_triples(polytopes, boxes, triples[start : start + TRIPLES_AT_ONCE])
         )
     points = np.concatenate([c for c in candidates if len(c)]) if candidates else np.zeros((0, 3))
-    points = points[stack.slack(points).min(axis=1) >= -TOL]
-    return dedupe(points)
+    return dedupe(points[~stack.strictly_inside(points)])
 
 
 def _overlaps(polytopes: list[Polytope]) -> np.ndarray:
@@ -178,6 +177,7 @@ class FacetStack:
         self.b = np.concatenate([p.b for p in polytopes])
         counts = [len(p.b) for p in polytopes]
         self.starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(int)
+        self.counts = counts
         self.owner = np.repeat(np.arange(len(polytopes)), counts)  # each facet's polytope
         self.lower = np.array([p.lower for p in polytopes]).reshape(-1, 3)  # their boxes
         self.upper = np.array([p.upper for p in polytopes]).reshape(-1, 3)
@@ -185,6 +185,22 @@ class FacetStack:
     def facet_slack(self, points: np.ndarray) -> np.ndarray:
         """(N, F) signed distance of each point to each facet plane [m]."""
         return np.atleast_2d(points) @ self.A.T - self.b
+
+    def strictly_inside(self, points: np.ndarray) -> np.ndarray:
+        """(N,) whether each point lies strictly inside (slack below −TOL) some polytope:
+        each measured only against the polytopes whose box holds it (a point outside a box
+        is outside its polytope), so many points against tens of pieces stay cheap."""
+        points = np.atleast_2d(points)
+        inside = np.zeros(len(points), dtype=bool)
+        for k, start in enumerate(self.starts.tolist()):
+            box = (points >= self.lower[k] - BOX_MARGIN) & (points <= self.upper[k] + BOX_MARGIN)
+            measured = np.flatnonzero(box.all(axis=1) & ~inside)
+            if len(measured) == 0:
+                continue
+            end = start + self.counts[k]
+            slack = (points[measured] @ self.A[start:end].T - self.b[start:end]).max(axis=1)
+            inside[measured[slack < -TOL]] = True
+        return inside
 
     def slack(self, points: np.ndarray) -> np.ndarray:
         """(N, P) per-polytope slack: < 0 strictly inside, ~0 on the boundary. Computed
