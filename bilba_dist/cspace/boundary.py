@@ -186,6 +186,13 @@ class FacetStack:
         """(N, F) signed distance of each point to each facet plane [m]."""
         return np.atleast_2d(points) @ self.A.T - self.b
 
+    def in_box(self, points: np.ndarray, k: int) -> np.ndarray:
+        """(N,) whether each point lies in polytope k's box, BOX_MARGIN around it: a point
+        outside it is outside the polytope and on none of its facets."""
+        return (
+            (points >= self.lower[k] - BOX_MARGIN) & (points <= self.upper[k] + BOX_MARGIN)
+        ).all(axis=1)
+
     def strictly_inside(self, points: np.ndarray) -> np.ndarray:
         """(N,) whether each point lies strictly inside (slack below −TOL) some polytope:
         each measured only against the polytopes whose box holds it (a point outside a box
@@ -193,8 +200,7 @@ class FacetStack:
         points = np.atleast_2d(points)
         inside = np.zeros(len(points), dtype=bool)
         for k, start in enumerate(self.starts.tolist()):
-            box = (points >= self.lower[k] - BOX_MARGIN) & (points <= self.upper[k] + BOX_MARGIN)
-            measured = np.flatnonzero(box.all(axis=1) & ~inside)
+            measured = np.flatnonzero(self.in_box(points, k) & ~inside)
             if len(measured) == 0:
                 continue
             end = start + self.counts[k]

@@ -153,35 +153,27 @@ class CObsSlice:
     def in_mode(self, points: np.ndarray, mode: ContactPair) -> np.ndarray:
         """Whether each point lies on the boundary region of ``mode``."""
         labelled = np.array([mode in label for label in self._facet_labels], dtype=bool)
-        on_union, on_facet = self._on_facets(np.atleast_2d(points))
-        return on_union & on_facet[:, labelled].any(axis=1)
-
-    def _on_facets(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Per point, whether it is on the union's boundary or outside it (N,), and which
-        facets it lies on, each on its own polytope's surface (N, F); within TOL."""
-        on_union, rows, facets = self._facet_hits(points)
-        on_facet = np.zeros((len(points), len(self.stack.b)), dtype=bool)
-        on_facet[rows, facets] = True
-        return on_union, on_facet
+        on_union, rows, facets = self._facet_hits(np.atleast_2d(points))
+        on_mode = np.zeros(len(on_union), dtype=bool)
+        on_mode[rows[labelled[facets]]] = True
+        return on_union & on_mode
 
     def _facet_hits(
         self, points: np.ndarray, near: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``_on_facets`` with the facets as (point, facet) index pairs, sorted by point and
-        then facet: a point lies on a few of thousands. A point outside a polytope's box (by
-        more than BOX_MARGIN) is outside it: only the points in its box are measured against
-        its facets (a part split into tens of pieces has thousands of facets, and each point
-        is near a few pieces). ``near`` (N, P), when given, rules out more: a point is
-        measured against polytope k only where ``near[:, k]``, which must hold wherever the
-        point may be inside it or on its surface."""
+        """Per point, whether it is on the union's boundary or outside it (N,), and the
+        facets it lies on, each on its own polytope's surface, within TOL, as (point, facet)
+        index pairs sorted by point and then facet (a point lies on a few of thousands).
+        Only the points in a polytope's box are measured against its facets
+        (`FacetStack.in_box`: a part split into tens of pieces has thousands of facets, and
+        each point is near a few pieces). ``near`` (N, P), when given, rules out more: a
+        point is measured against polytope k only where ``near[:, k]``, which must hold
+        wherever the point may be inside it or on its surface."""
         inside = np.zeros(len(points), dtype=bool)  # strictly inside some polytope
         rows, facets = [np.zeros(0, dtype=np.intp)], [np.zeros(0, dtype=np.intp)]
         for k, (p, start) in enumerate(zip(self.polytopes, self.stack.starts, strict=True)):
             measured = np.arange(len(points)) if near is None else np.flatnonzero(near[:, k])
-            box = (points[measured] >= p.lower - BOX_MARGIN) & (
-                points[measured] <= p.upper + BOX_MARGIN
-            )
-            measured = measured[box.all(axis=1)]
+            measured = measured[self.stack.in_box(points[measured], k)]
             if len(measured) == 0:
                 continue
             facet = points[measured] @ p.A.T - p.b
