@@ -20,6 +20,7 @@ from bilba_dist.belief.start import start_belief
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import NoScheduleError
 from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.geometry.neighbours import NearContacts
 from bilba_dist.modes.graph import ModeGraph
 from bilba_dist.modes.schedule import SliceCache, belief_graph
 from bilba_dist.planning.best import plan_best
@@ -303,6 +304,7 @@ def contact_search(
         race_contacts=params.race_contacts,
         race_chunks=params.race_chunks,
         recorder=recorder or NullRecorder(),
+        near=NearContacts.of(task.environment, task.manipuland, task.goal),
     )
 
 
@@ -376,7 +378,7 @@ def _attempts(
                     continue  # go on from the contact reached, on another schedule
                 break
             steps += outcome.steps
-            belief, mode = outcome.belief, furthest_common(schedule, outcome.belief)
+            belief, mode = outcome.belief, furthest_common(schedule, outcome.belief, search.near)
             reached.append(Reached(belief, mode, len(steps)))
             if mode == task.goal:
                 motions = planned_motions(steps, b0, panda)
@@ -443,7 +445,8 @@ def _replayed(
         for step in steps[done : reached[k].steps]:
             belief = belief.after(search.evaluator.simulate(belief.under(step.motion)))
         done = reached[k].steps
-        yield k, belief, belief.count(frozenset(r.mode for r in reached[k:])) == len(belief)
+        accept = search.near.accept(r.mode for r in reached[k:])
+        yield k, belief, belief.count(accept) == len(belief)
 
 
 def restart_at(
@@ -542,7 +545,7 @@ def _next_contact(
     particles in; ties: Dijkstra's)."""
     k = search.race_contacts
     schedules = graph.alternatives(mode, k) if k > 1 else [graph.schedule(mode)]
-    made = next((s for s in schedules if already_made(belief, s)), None)
+    made = next((s for s in schedules if already_made(belief, s, search.near)), None)
     if made is not None:
         _follow(search, attempt, result, made)
         return made, ContactOutcome(True, [], belief)
@@ -555,7 +558,8 @@ def _next_contact(
             return schedules[j], outcome
     schedule = schedules[j]
     _follow(search, attempt, result, schedule)
-    return schedule, make_contact(search, belief, schedule[1], frozenset(schedule[1:]), rng)
+    accept = search.near.accept(schedule[1:])
+    return schedule, make_contact(search, belief, schedule[1], accept, rng)
 
 
 def _follow(
@@ -565,24 +569,34 @@ def _follow(
     search.recorder.schedule(attempt, schedule)
 
 
-def already_made(belief: Belief, schedule: list[ContactPair]) -> bool:
+#: No face has neighbours: each mode counts as itself only.
+NO_NEIGHBOURS = NearContacts()
+
+
+def already_made(
+    belief: Belief, schedule: list[ContactPair], near: NearContacts = NO_NEIGHBOURS
+) -> bool:
     """Whether every particle, check particles included, is in ``schedule``'s next contact
     or past it already. A schedule from the contact reached need not be the one that
     reached it (Dijkstra after a contact, or after a pruned edge with ``keep_reached``), so
     the belief may be further along it than its first mode; searching for a motion into a
     contact every particle is in can only fail (no motion adds a particle) and pruned a
     good edge (puzzle env.y ±1 cm fixed, seed 1)."""
-    return furthest_common(schedule, belief) != schedule[0]
+    return furthest_common(schedule, belief, near) != schedule[0]
 
 
-def furthest_common(schedule: list[ContactPair], belief: Belief) -> ContactPair:
+def furthest_common(
+    schedule: list[ContactPair], belief: Belief, near: NearContacts = NO_NEIGHBOURS
+) -> ContactPair:
     """The furthest schedule mode that every particle has reached or passed, check particles
     included: a contact is made when they are all in it or past it, so a motion that carried
     the planning particles on to the goal but left a check particle at the contact sought
-    has made that contact, not the goal (the plan then goes on from there)."""
+    has made that contact, not the goal (the plan then goes on from there). A particle is
+    in a mode when it is in one of ``near.around`` it (a neighbouring face's contact)."""
     check = belief.check.contacts if belief.check is not None else ()
+    around = [near.around(m) for m in schedule]
     reached = [
-        max((k for k, m in enumerate(schedule) if m in contacts), default=0)
+        max((k for k, m in enumerate(around) if contacts & m), default=0)
         for contacts in (*belief.contacts, *check)
     ]
     return schedule[min(reached)]

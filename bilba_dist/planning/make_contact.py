@@ -10,6 +10,7 @@ import pinocchio as pin
 
 from bilba_dist.belief.state import Accept, Belief
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.neighbours import NearContacts
 from bilba_dist.modes.schedule import SliceCache
 from bilba_dist.planning.evaluate import Candidate, Evaluator, Scored, best_of, lagging_checks
 from bilba_dist.planning.gp import GPParams, features, propose
@@ -52,6 +53,9 @@ class ContactSearch:
     on_progress: Callable[[str, float], None] = field(default=lambda contact, best: None)
     recorder: Recorder = field(default_factory=NullRecorder)
     fit: StiffnessFit = unchanged  # planner.driver's form of K (planning/stiffness.py)
+    #: The contacts that count as the one sought (a face of a curved surface cut into pieces:
+    #: its neighbours too; geometry/neighbours.py).
+    near: NearContacts = field(default_factory=NearContacts)
 
     def motion(self, K: np.ndarray, G_d: pin.SE3) -> Motion:
         return Motion(self.fit(K, G_d), G_d, self.motion_timeout_s)
@@ -155,7 +159,7 @@ def race(
     turns = [(r, j) for r in range(search.race_chunks) for j in range(len(schedules))]
     for at, upcoming in zip(turns, [*turns[1:], None], strict=True):
         j = at[1]
-        mode, accept = schedules[j][1], frozenset(schedules[j][1:])
+        mode, accept = schedules[j][1], search.near.accept(schedules[j][1:])
         if j == len(drawn):
             on_start(j)
             drawn.append(sampled_candidates(search, belief, mode, accept, rng)[1])

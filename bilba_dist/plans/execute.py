@@ -15,6 +15,7 @@ from bilba_dist.belief.particles import Particle, initial_belief, make_particle
 from bilba_dist.belief.state import Belief
 from bilba_dist.errors import BilbaError
 from bilba_dist.geometry.contact import ContactPair
+from bilba_dist.geometry.neighbours import NearContacts
 from bilba_dist.planning.result import PlannedMotion
 from bilba_dist.plans.file import PlanFile
 from bilba_dist.plans.loads import Load, load_of
@@ -59,10 +60,11 @@ def steps_of(
     particles: Sequence[Particle],
     backend: RolloutBackend,
 ) -> Iterator[tuple[Step, Belief]]:
+    near = NearContacts.of(task.environment, task.manipuland, task.goal)
     for planned, (belief, results) in zip(
         motions, transitions(task, motions, particles, backend), strict=False
     ):
-        reached = [planned.contact in c for c in belief.contacts]
+        reached = [bool(c & near.around(planned.contact)) for c in belief.contacts]
         shown = [
             f"stopped: {s.stopped}, where a Franka halts with a reflex"
             if s.stopped

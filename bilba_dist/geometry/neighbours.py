@@ -1,0 +1,108 @@
+"""Neighbouring faces: where a meshed curved surface is cut into pieces, the faces beside a
+face.
+
+A round hole in a meshed plate that CoACD split into convex objects has a face per piece
+along its round wall (within a piece such facets are one face already, ``smooth_surfaces``).
+A particle held a few millimetres off touches the piece beside the one a contact names; to
+the planner that is still the contact sought (``NearContacts``): it says as much about where
+the part is. The relation is local: a face's neighbours are the unnamed faces of other
+pieces of the same part that touch it (two of its corners within ``TOUCH_M`` of the other
+face) and whose normal turns by more than ``NAME_MATCH_ANGLE`` and at most ``SMOOTH_ANGLE``
+from it. It is not carried on from neighbour to neighbour (a ring of walls is not one
+contact: reaching it says nothing of where the part is); faces in one plane are not
+neighbours (a flat surface cut in two is two places); and a face the task file names has
+none (as in ``smooth_surfaces``: a named face is its own contact; on a hole of 32 named
+wall pieces, counting the walls beside made the planner worse, docs/planner.md).
+"""
+
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.geometry.piece import (
+    NAME_MATCH_ANGLE,
+    SMOOTH_ANGLE,
+    UNNAMED,
+    ConvexPiece,
+    Face,
+    Part,
+)
+
+#: Two faces touch when two corners of one lie within this of the other [m]: CoACD's pieces
+#: meet along their cut planes to within a fraction of a millimetre.
+TOUCH_M = 5e-4
+
+
+def neighbouring_faces(part: Part) -> dict[str, frozenset[str]]:
+    """Each face name of ``part`` that has neighbours (module docstring): those names."""
+    facets = [
+        (piece, face)
+        for piece in part.pieces
+        for face in piece.faces
+        if UNNAMED.fullmatch(face.name.rpartition("/")[2])
+    ]
+    low, high = np.cos(SMOOTH_ANGLE), np.cos(NAME_MATCH_ANGLE)
+    near: dict[str, set[str]] = {}
+    for a, (piece_a, face_a) in enumerate(facets):
+        for piece_b, face_b in facets[a + 1 :]:
+            if piece_a is piece_b or face_a.name == face_b.name:
+                continue
+            if not low <= float(face_a.normal @ face_b.normal) < high:
+                continue
+            if _touch(piece_a, face_a, piece_b, face_b) or _touch(piece_b, face_b, piece_a, face_a):
+                near.setdefault(face_a.name, set()).add(face_b.name)
+                near.setdefault(face_b.name, set()).add(face_a.name)
+    return {name: frozenset(others) for name, others in near.items()}
+
+
+def _touch(piece_a: ConvexPiece, face_a: Face, piece_b: ConvexPiece, face_b: Face) -> bool:
+    """Whether two corners of ``face_a`` lie within ``TOUCH_M`` of the polygon ``face_b``."""
+    corners = piece_a.vertices[list(face_a.vertices)]
+    return int(np.count_nonzero(_distance(corners, piece_b, face_b) <= TOUCH_M)) >= 2
+
+
+def _distance(points: np.ndarray, piece: ConvexPiece, face: Face) -> np.ndarray:
+    """Each point's distance from the convex polygon ``face`` (exact off its edges, at most
+    that off its corners: enough to tell touching from apart)."""
+    ring = piece.vertices[list(face.vertices)]
+    edges = np.roll(ring, -1, axis=0) - ring
+    inward = np.cross(face.normal, edges)
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
+    height = points @ face.normal - face.offset
+    outside = np.einsum("ek,pek->pe", inward, ring[None] - points[:, None]).max(axis=1)
+    return np.hypot(height, np.maximum(outside, 0.0))
+
+
+def _same_surface(near: Mapping[str, frozenset[str]], face: str) -> frozenset[str]:
+    """``face`` and its neighbours."""
+    return frozenset([face]) | near.get(face, frozenset())
+
+
+@dataclass(frozen=True)
+class NearContacts:
+    """The contacts the planner counts as a contact sought: the pairs of its faces'
+    neighbours (either side's), except for the goal, which is the pair the task names."""
+
+    env: Mapping[str, frozenset[str]] = field(default_factory=dict)
+    manip: Mapping[str, frozenset[str]] = field(default_factory=dict)
+    goal: ContactPair = FREE
+
+    @classmethod
+    def of(cls, environment: Part, manipuland: Part, goal: ContactPair) -> "NearContacts":
+        return cls(neighbouring_faces(environment), neighbouring_faces(manipuland), goal)
+
+    def around(self, mode: ContactPair) -> frozenset[ContactPair]:
+        """``mode`` and the pairs of its faces' neighbours."""
+        if mode in (self.goal, FREE):
+            return frozenset([mode])
+        return frozenset(
+            ContactPair(env, manip)
+            for env in _same_surface(self.env, mode.env)
+            for manip in _same_surface(self.manip, mode.manip)
+        )
+
+    def accept(self, modes: Iterable[ContactPair]) -> frozenset[ContactPair]:
+        """The contact sets that count as in one of ``modes``: those holding one of these."""
+        return frozenset().union(*(self.around(m) for m in modes))

@@ -1,0 +1,103 @@
+"""Neighbouring faces across pieces (a curved surface cut into pieces) and the contacts the
+planner counts as a contact sought because of them."""
+
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from bilba_dist.belief.state import Belief
+from bilba_dist.geometry.contact import FREE, ContactPair
+from bilba_dist.geometry.neighbours import TOUCH_M, NearContacts, neighbouring_faces
+from bilba_dist.geometry.piece import UNNAMED, ConvexPiece, Part, convex_piece
+from bilba_dist.planning.bilba import already_made, furthest_common
+from bilba_dist.rollout import ParticleState
+from bilba_dist.task.loader import load_task
+from tests.conftest import prism_task
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def test_a_meshed_round_hole_has_neighbours_across_its_pieces():
+    """The round-peg example's plate, split by CoACD into 16 convex objects: the wall
+    facets of pieces side by side are neighbours, each relation both ways."""
+    task = load_task(str(EXAMPLES / "round-peg" / "round-peg.yaml"))
+    near = neighbouring_faces(task.environment)
+    assert near["plate_12/f1"] == {"plate_13/f1", "plate_7/f4"}
+    assert all(face in near[other] for face, others in near.items() for other in others)
+    assert neighbouring_faces(task.manipuland) == {}  # one piece: its side is one face already
+
+
+def test_named_faces_have_no_neighbours(tmp_path):
+    """A hole of 32 wall pieces, 11.25° apart, whose faces the task file names (inner,
+    chamfer, top): each is a contact of its own. Measured (generated 32-gon, 8 seeds of 9
+    at 120 s): counting neighbours' contacts there planned 0 where names alone planned 5."""
+    task = prism_task(tmp_path, 32, 0.002)
+    near = neighbouring_faces(task.environment)
+    assert near and all(UNNAMED.fullmatch(face.rpartition("/")[2]) for face in near)
+    assert "wall0/inner" not in near and "wall0/chamfer" not in near
+
+
+@pytest.mark.parametrize("sides", [4, 6, 8, 12])
+def test_polygon_holes_and_the_builtins_have_no_neighbours(tmp_path, sides):
+    """Walls 90° to 30° apart are faces of their own, as in the built-in tasks: their
+    planning is unchanged by construction."""
+    task = prism_task(tmp_path, sides, 0.002)
+    assert neighbouring_faces(task.environment) == {}
+    for name in ("peg-in-hole", "puzzle", "hex-peg"):
+        builtin = load_task(name)
+        assert neighbouring_faces(builtin.environment) == {}
+        assert neighbouring_faces(builtin.manipuland) == {}
+
+
+def _slab(name: str, x0: float, turn_deg: float, gap_m: float) -> ConvexPiece:
+    """A 20 mm slab from ``x0`` along x, turned ``turn_deg`` about the z axis at x = 0 and
+    moved ``gap_m`` along x: its faces unnamed (f0 ...)."""
+    corners = [[x, y, z] for x in (x0, x0 + 0.02) for y in (0, -0.01) for z in (0, 0.01)]
+    place = pin.SE3(pin.utils.rotate("z", np.deg2rad(turn_deg)), np.array([gap_m, 0, 0]))
+    return convex_piece(name, corners, place)
+
+
+def _face_along(piece: ConvexPiece, direction: np.ndarray) -> str:
+    return max(piece.faces, key=lambda f: f.normal @ direction).name
+
+
+@pytest.mark.parametrize(
+    ("turn", "gap", "neighbours"),
+    [(10, 0, True), (10, 0.4 * TOUCH_M, True), (10, 3 * TOUCH_M, False), (30, 0, False),
+     (0, 0, False)],
+)  # fmt: skip
+def test_faces_are_neighbours_when_they_touch_and_turn_a_little(turn, gap, neighbours):
+    """Two slabs side by side, the second turned: their top (+y) faces are neighbours only
+    when they touch (within TOUCH_M) and turn by more than a degree and at most 25°."""
+    first, second = _slab("a", -0.02, 0, 0), _slab("b", 0, turn, gap)
+    a = _face_along(first, np.array([0, 1, 0]))
+    b = _face_along(second, pin.utils.rotate("z", np.deg2rad(turn)) @ [0, 1, 0])
+    near = neighbouring_faces(Part("p", (first, second)))
+    assert (b in near.get(a, ())) is neighbours
+    assert (a in near.get(b, ())) is neighbours
+
+
+def _belief(contacts):
+    states = tuple(ParticleState(X_WM=pin.SE3.Identity()) for _ in contacts)
+    return Belief((None,) * len(contacts), states, tuple(map(frozenset, contacts)))  # type: ignore[arg-type]
+
+
+def test_a_neighbours_contact_counts_as_the_contact_sought_but_not_as_the_goal():
+    wall8, wall9, floor = (ContactPair(f"wall{k}/inner", "peg/f0") for k in (8, 9, 10))
+    goal = ContactPair("floor/top", "peg/bottom")
+    near = NearContacts({"wall8/inner": frozenset({"wall9/inner"}),
+                         "wall9/inner": frozenset({"wall8/inner"}),
+                         "floor/top": frozenset({"ring/top"})}, {}, goal)  # fmt: skip
+    assert near.around(wall8) == {wall8, wall9}
+    assert near.around(goal) == {goal} and near.around(FREE) == {FREE}
+    assert near.accept([wall8, goal]) == {wall8, wall9, goal}
+    schedule = [FREE, wall8, goal]
+    split = _belief([{wall8}, {wall9}, {wall8}])
+    assert furthest_common(schedule, split, near) == wall8
+    assert furthest_common(schedule, split) == FREE  # without neighbours: not made
+    assert already_made(split, schedule, near) and not already_made(split, schedule)
+    off_goal = _belief([{goal}, {ContactPair("ring/top", "peg/bottom")}])
+    assert furthest_common(schedule, off_goal, near) == FREE
+    assert floor not in near.around(wall8)
