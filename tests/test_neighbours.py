@@ -101,3 +101,35 @@ def test_a_neighbours_contact_counts_as_the_contact_sought_but_not_as_the_goal()
     off_goal = _belief([{goal}, {ContactPair("ring/top", "peg/bottom")}])
     assert furthest_common(schedule, off_goal, near) == FREE
     assert floor not in near.around(wall8)
+
+
+def test_the_planner_takes_a_neighbours_contact_as_made(peg):
+    """The outer loop reads the search's neighbours: particles on a neighbour of the next
+    contact's face have made it (no motion, no rollout)."""
+    from dataclasses import replace
+
+    from bilba_dist.belief.particles import initial_belief
+    from bilba_dist.modes.schedule import belief_graph
+    from bilba_dist.planning.bilba import _next_contact, contact_search
+    from bilba_dist.planning.evaluate import Evaluator
+    from bilba_dist.planning.result import PlanResult
+    from bilba_dist.workers.rollout_worker import RolloutWorker
+
+    worker = RolloutWorker(peg)
+    evaluator = Evaluator(worker)
+    search = contact_search(peg, evaluator, "bilba-fixed", deadline=float("inf"))
+    assert search.near.env == {} and search.near.goal == peg.goal  # the peg has none
+    graph, _ = belief_graph(peg, initial_belief(peg), peg.X_WG0, search.cache)
+    schedule = graph.schedule()
+    target = schedule[1]
+    beside = ContactPair("beside/f0", target.manip)
+    belief = _belief([{beside}, {beside}, {beside}])
+    assert not already_made(belief, schedule)  # on its own, "beside" is another contact
+    near = NearContacts({target.env: frozenset({"beside/f0"})}, {}, peg.goal)
+    search = replace(search, near=near)
+    rng = np.random.default_rng(0)
+    result = PlanResult(False, "", [], "bilba-fixed", 0)
+    followed, outcome = _next_contact(graph, belief, FREE, search, rng, 0, result)
+    assert outcome.success and outcome.steps == [] and evaluator.rollouts == 0
+    assert followed == schedule
+    worker.close()
