@@ -43,17 +43,22 @@ def neighbouring_faces(part: Part) -> dict[str, frozenset[str]]:
         for face in piece.faces
         if UNNAMED.fullmatch(face.name.rpartition("/")[2])
     ]
-    low, high = np.cos(SMOOTH_ANGLE), np.cos(NAME_MATCH_ANGLE)
+    if not facets:
+        return {}
+    normals = np.array([face.normal for _, face in facets])
+    cos = normals @ normals.T
+    turned = (cos >= np.cos(SMOOTH_ANGLE)) & (cos < np.cos(NAME_MATCH_ANGLE))
+    low = np.array([piece.vertices.min(axis=0) for piece, _ in facets]) - TOUCH_M
+    high = np.array([piece.vertices.max(axis=0) for piece, _ in facets]) + TOUCH_M
+    boxes_meet = np.all((low[:, None] <= high[None]) & (low[None] <= high[:, None]), axis=2)
     near: dict[str, set[str]] = {}
-    for a, (piece_a, face_a) in enumerate(facets):
-        for piece_b, face_b in facets[a + 1 :]:
-            if piece_a is piece_b or face_a.name == face_b.name:
-                continue
-            if not low <= float(face_a.normal @ face_b.normal) < high:
-                continue
-            if _touch(piece_a, face_a, piece_b, face_b) or _touch(piece_b, face_b, piece_a, face_a):
-                near.setdefault(face_a.name, set()).add(face_b.name)
-                near.setdefault(face_b.name, set()).add(face_a.name)
+    for a, b in zip(*np.nonzero(np.triu(turned & boxes_meet, 1)), strict=True):
+        (piece_a, face_a), (piece_b, face_b) = facets[a], facets[b]
+        if piece_a is piece_b or face_a.name == face_b.name:
+            continue
+        if _touch(piece_a, face_a, piece_b, face_b) or _touch(piece_b, face_b, piece_a, face_a):
+            near.setdefault(face_a.name, set()).add(face_b.name)
+            near.setdefault(face_b.name, set()).add(face_a.name)
     return {name: frozenset(others) for name, others in near.items()}
 
 
@@ -64,8 +69,9 @@ def _touch(piece_a: ConvexPiece, face_a: Face, piece_b: ConvexPiece, face_b: Fac
 
 
 def _distance(points: np.ndarray, piece: ConvexPiece, face: Face) -> np.ndarray:
-    """Each point's distance from the convex polygon ``face`` (exact off its edges, at most
-    that off its corners: enough to tell touching from apart)."""
+    """Each point's distance from the convex polygon ``face``: exact off its edges, less off
+    its corners (so ``neighbouring_faces`` first drops pairs whose pieces' boxes lie apart:
+    on a 100-piece plate the corner error alone joined faces 1 to 22 mm apart)."""
     ring = piece.vertices[list(face.vertices)]
     edges = np.roll(ring, -1, axis=0) - ring
     inward = np.cross(face.normal, edges)
