@@ -133,3 +133,19 @@ def test_the_planner_takes_a_neighbours_contact_as_made(peg):
     assert outcome.success and outcome.steps == [] and evaluator.rollouts == 0
     assert followed == schedule
     worker.close()
+
+
+def test_the_distance_from_a_face_is_exact_over_it_and_beyond_its_corners():
+    """Against a dense sampling of a box's top face: points over it, off an edge, off a
+    corner and below the plane (seeded)."""
+    from bilba_dist.geometry.neighbours import _distance
+    from bilba_dist.geometry.piece import box_piece
+
+    box = box_piece("b", [0.02, 0.01, 0.01], pin.SE3.Identity())
+    top = box.face("b/+z")
+    rng = np.random.default_rng(3)
+    points = rng.uniform([-0.02, -0.01, -0.01], [0.02, 0.01, 0.02], size=(200, 3))
+    grid = np.stack(np.meshgrid(np.linspace(-0.01, 0.01, 401), np.linspace(-0.005, 0.005, 201)))
+    samples = np.column_stack([grid[0].ravel(), grid[1].ravel(), np.full(grid[0].size, 0.005)])
+    brute = np.array([np.linalg.norm(samples - p, axis=1).min() for p in points])
+    assert np.allclose(_distance(points, box, top), brute, atol=4e-5)

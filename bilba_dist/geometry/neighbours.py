@@ -69,16 +69,17 @@ def _touch(piece_a: ConvexPiece, face_a: Face, piece_b: ConvexPiece, face_b: Fac
 
 
 def _distance(points: np.ndarray, piece: ConvexPiece, face: Face) -> np.ndarray:
-    """Each point's distance from the convex polygon ``face``: exact off its edges, less off
-    its corners (so ``neighbouring_faces`` first drops pairs whose pieces' boxes lie apart:
-    on a 100-piece plate the corner error alone joined faces 1 to 22 mm apart)."""
+    """Each point's distance from the convex polygon ``face``: its height over the plane
+    where it lies over the polygon, else its distance from the nearest edge."""
     ring = piece.vertices[list(face.vertices)]
     edges = np.roll(ring, -1, axis=0) - ring
     inward = np.cross(face.normal, edges)
-    inward /= np.linalg.norm(inward, axis=1, keepdims=True)
-    height = points @ face.normal - face.offset
-    outside = np.einsum("ek,pek->pe", inward, ring[None] - points[:, None]).max(axis=1)
-    return np.hypot(height, np.maximum(outside, 0.0))
+    offset = points[:, None] - ring[None]  # (point, edge start, xyz)
+    over = np.all(np.einsum("ek,pek->pe", inward, offset) >= 0, axis=1)
+    along = np.einsum("ek,pek->pe", edges, offset) / np.einsum("ek,ek->e", edges, edges)
+    nearest = ring[None] + np.clip(along, 0, 1)[..., None] * edges[None]
+    to_edge = np.linalg.norm(points[:, None] - nearest, axis=2).min(axis=1)
+    return np.where(over, np.abs(points @ face.normal - face.offset), to_edge)
 
 
 def _same_surface(near: Mapping[str, frozenset[str]], face: str) -> frozenset[str]:
