@@ -11,6 +11,7 @@ inside all three lies in both (a meshed part split into tens of convex pieces ma
 thousands of triples, each of up to 10⁵ facet combinations).
 """
 
+from collections.abc import Iterator
 from itertools import combinations, permutations
 
 import numpy as np
@@ -113,20 +114,23 @@ def _facet_triples(
     facet = np.concatenate([np.stack(f, axis=1) for f in picked])  # (R, 3) facet per slot
     normals = np.empty((len(facet), 3, 3))
     offsets = np.empty((len(facet), 3))
-    for slot in range(3):
-        for p in np.unique(owner[:, slot]).tolist():
-            rows = np.flatnonzero(owner[:, slot] == p)
-            normals[rows, slot] = polytopes[p].A[facet[rows, slot]]
-            offsets[rows, slot] = polytopes[p].b[facet[rows, slot]]
+    for slot, p, rows in _by_polytope(owner):
+        normals[rows, slot] = polytopes[p].A[facet[rows, slot]]
+        offsets[rows, slot] = polytopes[p].b[facet[rows, slot]]
     ok = np.abs(np.linalg.det(normals)) > SINGULAR
     points = np.linalg.solve(normals[ok], offsets[ok][:, :, None])[:, :, 0]
-    owner = owner[ok]
     inside = np.ones(len(points), dtype=bool)
+    for _, p, rows in _by_polytope(owner[ok]):
+        inside[rows] &= _inside_closed(polytopes[p], points[rows])
+    return points[inside]
+
+
+def _by_polytope(owner: np.ndarray) -> Iterator[tuple[int, int, np.ndarray]]:
+    """For each slot of ``owner`` (R, 3) and each polytope in it: (slot, polytope, the rows
+    it owns there)."""
     for slot in range(3):
         for p in np.unique(owner[:, slot]).tolist():
-            rows = np.flatnonzero(owner[:, slot] == p)
-            inside[rows] &= _inside_closed(polytopes[p], points[rows])
-    return points[inside]
+            yield slot, p, np.flatnonzero(owner[:, slot] == p)
 
 
 def _triple_facets(

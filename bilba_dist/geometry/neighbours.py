@@ -54,7 +54,7 @@ def neighbouring_faces(part: Part) -> dict[str, frozenset[str]]:
     near: dict[str, set[str]] = {}
     for a, b in zip(*np.nonzero(np.triu(turned & boxes_meet, 1)), strict=True):
         (piece_a, face_a), (piece_b, face_b) = facets[a], facets[b]
-        if piece_a is piece_b or face_a.name == face_b.name:
+        if piece_a is piece_b:  # (a face's name holds its piece's)
             continue
         if _touch(piece_a, face_a, piece_b, face_b) or _touch(piece_b, face_b, piece_a, face_a):
             near.setdefault(face_a.name, set()).add(face_b.name)
