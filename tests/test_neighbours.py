@@ -63,6 +63,21 @@ def _face_along(piece: ConvexPiece, direction: np.ndarray) -> str:
     return max(piece.faces, key=lambda f: f.normal @ direction).name
 
 
+@pytest.mark.parametrize(("tilt", "neighbours"), [(0, True), (10, False)])
+def test_faces_meeting_at_one_corner_are_not_neighbours(tilt, neighbours):
+    """The second slab turned 10° about the z axis through the shared edge, then tilted
+    ``tilt`` about the y axis through that edge's lower corner: tilted, the top faces still
+    touch at that corner, but the edge's upper corners part by 1.7 mm, so the faces no longer
+    meet along a seam and are two places."""
+    first = _slab("a", -0.02, 0, 0)
+    turn = pin.utils.rotate("y", np.deg2rad(tilt)) @ pin.utils.rotate("z", np.deg2rad(10))
+    corners = [[x, y, z] for x in (0, 0.02) for y in (0, -0.01) for z in (0, 0.01)]
+    second = convex_piece("b", corners, pin.SE3(turn, np.zeros(3)))
+    a = _face_along(first, np.array([0, 1, 0]))
+    b = _face_along(second, turn @ [0, 1, 0])
+    assert (b in neighbouring_faces(Part("p", (first, second))).get(a, ())) is neighbours
+
+
 @pytest.mark.parametrize(
     ("turn", "gap", "neighbours"),
     [(10, 0, True), (10, 0.4 * TOUCH_M, True), (10, 3 * TOUCH_M, False), (30, 0, False),
