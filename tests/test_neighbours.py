@@ -7,14 +7,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from bilba_dist.belief.state import Belief
 from bilba_dist.geometry.contact import FREE, ContactPair
 from bilba_dist.geometry.neighbours import TOUCH_M, NearContacts, neighbouring_faces
 from bilba_dist.geometry.piece import UNNAMED, ConvexPiece, Part, convex_piece
 from bilba_dist.planning.bilba import already_made, furthest_common
-from bilba_dist.rollout import ParticleState
 from bilba_dist.task.loader import load_task
 from tests.conftest import prism_task
+from tests.test_planner import belief_with
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
@@ -94,11 +93,6 @@ def test_faces_are_neighbours_when_they_touch_and_turn_a_little(turn, gap, neigh
     assert (a in near.get(b, ())) is neighbours
 
 
-def _belief(contacts):
-    states = tuple(ParticleState(X_WM=pin.SE3.Identity()) for _ in contacts)
-    return Belief((None,) * len(contacts), states, tuple(map(frozenset, contacts)))  # type: ignore[arg-type]
-
-
 def test_a_neighbours_contact_counts_as_the_contact_sought_but_not_as_the_goal():
     wall8, wall9, floor = (ContactPair(f"wall{k}/inner", "peg/f0") for k in (8, 9, 10))
     goal = ContactPair("floor/top", "peg/bottom")
@@ -109,11 +103,11 @@ def test_a_neighbours_contact_counts_as_the_contact_sought_but_not_as_the_goal()
     assert near.around(goal) == {goal} and near.around(FREE) == {FREE}
     assert near.accept([wall8, goal]) == {wall8, wall9, goal}
     schedule = [FREE, wall8, goal]
-    split = _belief([{wall8}, {wall9}, {wall8}])
+    split = belief_with([{wall8}, {wall9}, {wall8}])
     assert furthest_common(schedule, split, near) == wall8
     assert furthest_common(schedule, split) == FREE  # without neighbours: not made
     assert already_made(split, schedule, near) and not already_made(split, schedule)
-    off_goal = _belief([{goal}, {ContactPair("ring/top", "peg/bottom")}])
+    off_goal = belief_with([{goal}, {ContactPair("ring/top", "peg/bottom")}])
     assert furthest_common(schedule, off_goal, near) == FREE
     assert floor not in near.around(wall8)
 
@@ -138,7 +132,7 @@ def test_the_planner_takes_a_neighbours_contact_as_made(peg):
     schedule = graph.schedule()
     target = schedule[1]
     beside = ContactPair("beside/f0", target.manip)
-    belief = _belief([{beside}, {beside}, {beside}])
+    belief = belief_with([{beside}, {beside}, {beside}])
     assert not already_made(belief, schedule)  # on its own, "beside" is another contact
     near = NearContacts({target.env: frozenset({"beside/f0"})}, {}, peg.goal)
     search = replace(search, near=near)
