@@ -50,11 +50,16 @@ def test_polygon_holes_and_the_builtins_have_no_neighbours(tmp_path, sides):
         assert neighbouring_faces(builtin.manipuland) == {}
 
 
-def _slab(name: str, x0: float, turn_deg: float, gap_m: float) -> ConvexPiece:
-    """A 20 mm slab from ``x0`` along x, turned ``turn_deg`` about the z axis at x = 0 and
-    moved ``gap_m`` along x: its faces unnamed (f0 ...)."""
+def _turn(turn_deg: float, tilt_deg: float = 0) -> np.ndarray:
+    """``turn_deg`` about the z axis, then ``tilt_deg`` about the y axis."""
+    return pin.utils.rotate("y", np.deg2rad(tilt_deg)) @ pin.utils.rotate("z", np.deg2rad(turn_deg))
+
+
+def _slab(name: str, x0: float, turn_deg: float, gap_m: float, tilt_deg: float = 0) -> ConvexPiece:
+    """A 20 mm slab from ``x0`` along x, turned by ``_turn`` about the origin and moved
+    ``gap_m`` along x: its faces unnamed (f0 ...)."""
     corners = [[x, y, z] for x in (x0, x0 + 0.02) for y in (0, -0.01) for z in (0, 0.01)]
-    place = pin.SE3(pin.utils.rotate("z", np.deg2rad(turn_deg)), np.array([gap_m, 0, 0]))
+    place = pin.SE3(_turn(turn_deg, tilt_deg), np.array([gap_m, 0, 0]))
     return convex_piece(name, corners, place)
 
 
@@ -68,12 +73,9 @@ def test_faces_meeting_at_one_corner_are_not_neighbours(tilt, neighbours):
     ``tilt`` about the y axis through that edge's lower corner: tilted, the top faces still
     touch at that corner, but the edge's upper corners part by 1.7 mm, so the faces no longer
     meet along a seam and are two places."""
-    first = _slab("a", -0.02, 0, 0)
-    turn = pin.utils.rotate("y", np.deg2rad(tilt)) @ pin.utils.rotate("z", np.deg2rad(10))
-    corners = [[x, y, z] for x in (0, 0.02) for y in (0, -0.01) for z in (0, 0.01)]
-    second = convex_piece("b", corners, pin.SE3(turn, np.zeros(3)))
+    first, second = _slab("a", -0.02, 0, 0), _slab("b", 0, 10, 0, tilt)
     a = _face_along(first, np.array([0, 1, 0]))
-    b = _face_along(second, turn @ [0, 1, 0])
+    b = _face_along(second, _turn(10, tilt) @ [0, 1, 0])
     assert (b in neighbouring_faces(Part("p", (first, second))).get(a, ())) is neighbours
 
 
@@ -87,7 +89,7 @@ def test_faces_are_neighbours_when_they_touch_and_turn_a_little(turn, gap, neigh
     when they touch (within TOUCH_M) and turn by more than a degree and at most 25°."""
     first, second = _slab("a", -0.02, 0, 0), _slab("b", 0, turn, gap)
     a = _face_along(first, np.array([0, 1, 0]))
-    b = _face_along(second, pin.utils.rotate("z", np.deg2rad(turn)) @ [0, 1, 0])
+    b = _face_along(second, _turn(turn) @ [0, 1, 0])
     near = neighbouring_faces(Part("p", (first, second)))
     assert (b in near.get(a, ())) is neighbours
     assert (a in near.get(b, ())) is neighbours
